@@ -208,8 +208,18 @@ def _read_metadata(json_path: Path) -> tuple[dict, list[str]]:
         raise TrialFormatError(f"{json_path}: JSON does not parse: {exc}") from None
     if not isinstance(meta, dict):
         raise TrialFormatError(f"{json_path}: metadata must be a JSON object")
+    return meta, complete_metadata(meta, json_path)
+
+
+def complete_metadata(meta: dict, where) -> list[str]:
+    """Check the metadata keys and fill absent ones from the reference, in place.
+
+    Shared by the readers of other containers (e.g. estimation's ``.mat`` reader).
+    Returns the keys filled; raises TrialFormatError naming ``where``.
+    """
+    json_path = where
     n_dof = meta.get("n_dof", 2)
-    if not isinstance(n_dof, int) or n_dof < 1:
+    if not isinstance(n_dof, int) or isinstance(n_dof, bool) or n_dof < 1:
         raise TrialFormatError(f"{json_path}: key 'n_dof' must be a positive integer, "
                                f"got {n_dof!r}")
     defaults = default_metadata(n_dof)
@@ -232,7 +242,7 @@ def _read_metadata(json_path: Path) -> tuple[dict, list[str]]:
     fs = meta["fs"]
     if not isinstance(fs, (int, float)) or not np.isfinite(fs) or fs <= 0:
         raise TrialFormatError(f"{json_path}: key 'fs' must be a positive number, got {fs!r}")
-    return meta, filled
+    return filled
 
 
 def _read_table(csv_path: Path) -> tuple[list[str], np.ndarray]:
