@@ -1,0 +1,144 @@
+"""Build ``fmus/build/ArmExoPlant.fmu`` from the C sources with the system compiler.
+
+Usage: ``python -m fmus.build [--out-dir DIR] [--cc CC]``.
+
+The FMU holds ``modelDescription.xml``, ``binaries/<platform>/ArmExoPlant.<ext>``
+and ``sources/`` (every C file and header needed to rebuild it, including the FMI
+2.0 headers that FMPy ships; compile ``sources/ArmExoPlant_all.c``).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+from . import generate
+from .variables import MODEL_NAME
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+MODEL_DIR = PACKAGE_DIR / MODEL_NAME
+FRAMEWORK_DIR = PACKAGE_DIR / "framework"
+BUILD_DIR = PACKAGE_DIR / "build"
+FMU_NAME = f"{MODEL_NAME}.fmu"
+
+#: -O3 without -ffast-math: -ffast-math implies -ffinite-math-only, which lets the
+#: compiler delete the isfinite()/NaN checks that stop a diverging step.
+#: -fno-math-errno only stops libm from setting errno (and lets sin/cos combine).
+CFLAGS = ["-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-fno-math-errno", "-Wall", "-Wextra"]
+
+FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+
+
+class BuildError(RuntimeError):
+    """The C compiler failed or is missing."""
+
+
+def _fmi_header_dir() -> Path:
+    import fmpy
+
+    return Path(fmpy.__file__).resolve().parent / "c-code"
+
+
+def _platform() -> tuple[str, str]:
+    system = platform.system()
+    if system == "Linux":
+        return "linux64", ".so"
+    if system == "Darwin":
+        return "darwin64", ".dylib"
+    raise BuildError(f"unsupported platform {system!r} (build on Linux or macOS)")
+
+
+def source_files() -> list[Path]:
+    """Every file the FMU is built from (the C sources and the generators)."""
+    files = sorted(MODEL_DIR.glob("*.c")) + sorted(MODEL_DIR.glob("*.h")) + [MODEL_DIR / "modelDescription.xml"]
+    files += sorted(FRAMEWORK_DIR.glob("*.c")) + sorted(FRAMEWORK_DIR.glob("*.h"))
+    files += [PACKAGE_DIR / "variables.py", PACKAGE_DIR / "generate.py", PACKAGE_DIR / "build.py"]
+    return files
+
+
+def _c_sources() -> list[Path]:
+    return (sorted(MODEL_DIR.glob("*.c")) + sorted(MODEL_DIR.glob("*.h"))
+            + sorted(FRAMEWORK_DIR.glob("*.c")) + sorted(FRAMEWORK_DIR.glob("*.h")))
+
+
+def build_fmu(out_dir: str | os.PathLike | None = None, *, cc: str | None = None) -> Path:
+    """Generate, compile and package the FMU; return the path of the ``.fmu``.
+
+    Parameters
+    ----------
+    out_dir : path, optional
+        Folder for ``ArmExoPlant.fmu`` (default ``fmus/build/``).
+    cc : str, optional
+        C compiler (default: ``$CC`` or ``cc``).
+    """
+    out_dir = Path(out_dir) if out_dir is not None else BUILD_DIR
+    out_dir.mkdir(parents=True, exist_ok=True)
+    cc = cc or os.environ.get("CC", "cc")
+    plat, ext = _platform()
+    generate.generate()
+    with tempfile.TemporaryDirectory(prefix="armexo-build-") as tmp:
+        src = Path(tmp) / "sources"
+        src.mkdir()
+        for f in _c_sources():
+            shutil.copy2(f, src / f.name)
+        for h in FMI_HEADERS:
+            shutil.copy2(_fmi_header_dir() / h, src / h)
+        lib = Path(tmp) / f"{MODEL_NAME}{ext}"
+        cmd = [cc, *CFLAGS, "-I", str(src), "-o", str(lib), str(src / f"{MODEL_NAME}_all.c"), "-lm"]
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True)
+        except FileNotFoundError as exc:
+            raise BuildError(f"C compiler {cc!r} not found; install a C compiler or set CC") from exc
+        if proc.returncode != 0:
+            raise BuildError(f"compiling the FMU failed ({' '.join(cmd)}):\n{proc.stderr}")
+        tmp_fmu = out_dir / f".{FMU_NAME}.{os.getpid()}.tmp"
+        with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
+            z.write(MODEL_DIR / "modelDescription.xml", "modelDescription.xml")
+            z.write(lib, f"binaries/{plat}/{MODEL_NAME}{ext}")
+            for f in sorted(src.iterdir()):
+                z.write(f, f"sources/{f.name}")
+            z.write(MODEL_DIR / "readme.md", "documentation/readme.md")
+        os.replace(tmp_fmu, out_dir / FMU_NAME)  # atomic: readers never see half an FMU
+    return out_dir / FMU_NAME
+
+
+def default_fmu_path(build_if_missing: bool = True) -> Path:
+    """Path of ``fmus/build/ArmExoPlant.fmu``, (re)built if missing or older than a source.
+
+    Parameters
+    ----------
+    build_if_missing : bool
+        If False, only return the path (raise FileNotFoundError when it is missing).
+    """
+    path = BUILD_DIR / FMU_NAME
+    if not build_if_missing:
+        if not path.exists():
+            raise FileNotFoundError(f"{path} not built: run `python -m fmus.build`")
+        return path
+    if not path.exists() or max(f.stat().st_mtime for f in source_files()) > path.stat().st_mtime:
+        return build_fmu()
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m fmus.build", description=__doc__.splitlines()[0])
+    parser.add_argument("--out-dir", default=None, help="output folder (default fmus/build/)")
+    parser.add_argument("--cc", default=None, help="C compiler (default $CC or cc)")
+    args = parser.parse_args(argv)
+    try:
+        path = build_fmu(args.out_dir, cc=args.cc)
+    except BuildError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
