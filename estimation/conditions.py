@@ -1,0 +1,149 @@
+"""Grouping trials into experimental conditions by their metadata, and scoring them.
+
+A condition is (friction level, resolution level, perturbation level, tuning), read from
+the declared metadata (never from file names and never from ``meta["simulation"]``).
+A level that matches no reference level is shown as ``"custom"``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trialformat import reference as ref
+
+from .accuracy import fit_second_order, left_limit_delay, true_impedance, vaf
+from .estimator import estimate_impedance
+
+#: (name, estimator method, sampling compensation) evaluated per condition when possible.
+VARIANTS = (
+    ("decomposition", "decomposition", False),
+    ("decomposition+comp", "decomposition", True),
+    ("full", "full", False),
+    ("full+comp", "full", True),
+    ("closed_loop+comp", "closed_loop", True),
+    ("direct+comp", "direct", True),
+)
+
+
+@dataclass(frozen=True, order=True)
+class Condition:
+    """An experimental condition; levels are ints, or ``"custom"`` when no reference matches."""
+
+    friction: object
+    resolution: object
+    perturbation: object
+    tuning: str
+
+    @property
+    def label(self) -> str:
+        return f"F{self.friction}R{self.resolution}P{self.perturbation}"
+
+
+def condition_of(trial) -> Condition:
+    """The condition a trial declares in its metadata."""
+    meta = trial.meta
+    fric = meta["friction"]
+    friction = next((lvl for lvl in range(4) if all(
+        np.allclose(fric[k], ref.friction_level(lvl, trial.n_dof)[k])
+        for k in ("Fc", "Fs", "sigma2"))), "custom")
+    sens = meta["sensors"]
+    resolution = next((lvl for lvl in range(4) if all(
+        np.isclose(sens[k], ref.sensor_level(lvl)[k]) for k in sens
+        if k in ref.sensor_level(lvl))), "custom")
+    pert = meta.get("perturbation", {}).get("level", "custom")
+    tuning = meta["controller"].get("tuning") or _tuning_from_gains(meta["controller"])
+    return Condition(friction, resolution, pert, tuning)
+
+
+def _tuning_from_gains(controller) -> str:
+    for name in ("reference", "robust"):
+        c = ref.controller(name)
+        if np.allclose(controller["Mbar"], c["Mbar"]) and np.allclose(controller["wn"], c["wn"]):
+            return name
+    return "custom"
+
+
+def group_conditions(trials) -> dict:
+    """``{Condition: [trials]}``, sorted by condition (custom levels last)."""
+    groups = {}
+    for t in trials:
+        groups.setdefault(condition_of(t), []).append(t)
+    return dict(sorted(groups.items(), key=lambda kv: tuple(
+        (1, str(v)) if isinstance(v, str) else (0, v) for v in
+        (kv[0].friction, kv[0].resolution, kv[0].perturbation)) + (kv[0].tuning,)))
+
+
+def evaluate(trials, *, truth=None, variants=VARIANTS, band_hz=(0.0, 15.0)) -> list[dict]:
+    """Score every variant that the trials allow.
+
+    Parameters
+    ----------
+    trials : list of trialformat.Trial
+        One condition: decomposition trials (``perturbed_dof`` set) and/or all-joints trials.
+    truth : (M, B, K) or None
+        True arm matrices. None (lab data): VAF is computed against the fitted
+        second-order model, and parameter errors are not given.
+    variants : sequence of (name, method, compensate)
+
+    Returns
+    -------
+    list of dict
+        One row per variant: ``variant, method, compensated``, and per element ``ik``:
+        ``vaf_ik`` [%], ``r2_ik``, ``coh_ik``, ``M_ik``, ``B_ik``, ``K_ik``, their CI
+        half-widths ``M_ci_ik``..., and with a truth ``err_M_ik``... [%]; plus the
+        summaries ``vaf_min, r2_min, coh_min, err_M_max, err_B_max, err_K_max``.
+    """
+    has_single = any(t.perturbed_dof is not None for t in trials)
+    has_all = any(t.perturbed_dof is None for t in trials)
+    rows, cache = [], {}
+    for name, method, compensate in variants:
+        needs_single = method in ("decomposition", "full")
+        if (needs_single and not has_single) or (not needs_single and not has_all):
+            continue
+        use = [t for t in trials if (t.perturbed_dof is not None) == needs_single]
+        if method not in cache:
+            cache[method] = estimate_impedance(use, method=method, band_hz=band_hz)
+        rows.append(score(cache[method], truth=truth, compensate=compensate, name=name))
+    return rows
+
+
+def score(est, *, truth=None, compensate=False, name="") -> dict:
+    """Accuracy and reliability of one estimate (see :func:`evaluate`)."""
+    delay = left_limit_delay(est.fs) if compensate else 0.0
+    fit = fit_second_order(est.f, est.Z, band_hz=est.band_hz, inertia_delay_s=delay)
+    b = est.band
+    Z = compensated_impedance(est.f[b], est.Z[b], fit) if compensate else est.Z[b]
+    if truth is None:
+        reference_Z = true_impedance(est.f[b], fit.M, fit.B, fit.K)
+    else:
+        reference_Z = true_impedance(est.f[b], *truth)
+    row = {"variant": name or est.method, "method": est.method, "compensated": compensate,
+           "n_segments": est.n_segments}
+    per = {"vaf": vaf(Z, reference_Z), "r2": fit.r2, "coh": est.mean_coherence(),
+           "M": fit.M, "B": fit.B, "K": fit.K, "M_ci": fit.M_ci, "B_ci": fit.B_ci,
+           "K_ci": fit.K_ci}
+    if truth is not None:
+        for k, v in fit.relative_errors(*truth).items():
+            per[f"err_{k}"] = 100 * v
+    n = est.n_dof
+    for key, arr in per.items():
+        for i in range(n):
+            for k in range(n):
+                row[f"{key}_{i + 1}{k + 1}"] = float(arr[i, k])
+    row.update(vaf_min=float(per["vaf"].min()), r2_min=float(per["r2"].min()),
+               coh_min=float(per["coh"].min()))
+    if truth is not None:
+        row.update({f"err_{p}_max": float(np.abs(per[f"err_{p}"]).max()) for p in "MBK"})
+    return row
+
+
+def compensated_impedance(f, Z, fit) -> np.ndarray:
+    """Remove the modelled left-limit sampling term from Z with the fitted M [N m/rad].
+
+    ``Z_comp = Z + M w^2 (exp(-j w tau) - 1)``, tau = ``fit.inertia_delay_s``: the
+    estimate as the continuous arm would give it, if the sampling model holds.
+    """
+    w = 2 * np.pi * np.asarray(f, float).reshape((-1,) + (1,) * np.ndim(fit.M))
+    return Z + fit.M * w ** 2 * (np.exp(-1j * w * fit.inertia_delay_s) - 1)

@@ -1,0 +1,246 @@
+"""Impedance estimators on trials: the paper's decomposition estimator and three others.
+
+Methods (docs/estimation.md has the derivations):
+
+``"decomposition"`` (paper, eqs. 15-18)
+    One trial per joint k (``perturbed_dof = k``). ``R_kk = G(d_k, theta_k) / G(d_k, d_k)``,
+    ``T_ik = G(d_k, tau_h_i) / G(d_k, d_k)``, ``Z_ik = T_ik / R_kk``. Assumes the held
+    joints do not move; when they do, ``Z_ik`` is biased by ``Z_ij P_jk / P_kk``.
+``"full"``
+    The same trials, but the full response from the perturbations to the angles,
+    ``P_ik = G(d_k, theta_i) / G(d_k, d_k)`` (column k from trial k), so that
+    ``T = Z P`` holds exactly and ``Z = T P^-1``: no assumption on the held joints.
+``"closed_loop"`` (de Vlugt 2003, Palazzolo 2007)
+    Trials with every joint perturbed at once by independent perturbations
+    (``perturbed_dof = null``); the perturbation is the instrument:
+    ``P = G_{d theta} G_{dd}^-1``, ``T = G_{d tau} G_{dd}^-1`` (MIMO H1), ``Z = T P^-1``.
+``"direct"`` (open loop, Perreault 1999 style)
+    The same all-joints trials, measured angles as input: ``Z = G_{theta tau} G_{theta theta}^-1``
+    (MIMO H1 from theta to tau_h). Biased by noise on theta and by feedback.
+
+Spectral conventions are those of :mod:`estimation.spectral` (Table IV by default).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import spectral
+from .errors import EstimationError
+from .spectral import WelchOptions
+
+METHODS = ("decomposition", "full", "closed_loop", "direct")
+BAND_HZ = (0.0, 15.0)
+
+
+@dataclass
+class ImpedanceEstimate:
+    """An impedance estimate with its building blocks and reliability measures.
+
+    Attributes
+    ----------
+    f : ndarray [Hz], shape (nf,)
+    Z : ndarray [N m/rad], complex, shape (nf, n, n)
+        ``Z[:, i, k]`` is the estimate of Z_ik (torque at joint i per angle of joint k).
+    P : ndarray [rad/(N m)], complex, shape (nf, n, n)
+        Response from perturbation k to angle i (``R_kk`` on the diagonal); NaN for the
+        ``direct`` method, which does not use the perturbation.
+    T : ndarray [-], complex, shape (nf, n, n)
+        Response from perturbation k to measured torque i (NaN for ``direct``).
+    coherence_P, coherence_T : ndarray [-], shape (nf, n, n)
+        Ordinary coherence of each SIMO path d_k -> theta_i, d_k -> tau_h_i (decomposition
+        trials), or multiple coherence of the output on all inputs (all-joints trials;
+        then equal along k).
+    coherence_Z : ndarray [-], shape (nf, n, n)
+        Derived coherence of each Z_ik (docs/estimation.md): ``coherence_T[:, i, k] *
+        coherence_P[:, k, k]``, the coherence the direct estimate from theta_k to tau_h_i
+        would have with the same, uncorrelated, output noise.
+    method : str
+    fs : float [Hz]
+    band_hz : tuple of float
+        Evaluation band ``(f_lo, f_hi)``: bins with ``f_lo < f <= f_hi``.
+    n_segments : int
+        Welch segments averaged per joint (smallest over the joints).
+    trials : list of str
+        Names of the trials used.
+    """
+
+    f: np.ndarray
+    Z: np.ndarray
+    P: np.ndarray
+    T: np.ndarray
+    coherence_P: np.ndarray
+    coherence_T: np.ndarray
+    coherence_Z: np.ndarray
+    method: str
+    fs: float
+    band_hz: tuple = BAND_HZ
+    n_segments: int = 0
+    trials: list = field(default_factory=list)
+
+    @property
+    def n_dof(self) -> int:
+        return int(self.Z.shape[1])
+
+    @property
+    def R(self) -> np.ndarray:
+        """Diagonal responses ``R_kk`` [rad/(N m)], shape (nf, n)."""
+        return np.diagonal(self.P, axis1=1, axis2=2).copy()
+
+    @property
+    def band(self) -> np.ndarray:
+        """Boolean mask of the evaluation band, ``f_lo < f <= f_hi``."""
+        return band_mask(self.f, self.band_hz)
+
+    def mean_coherence(self) -> np.ndarray:
+        """Band mean of the derived coherence of each Z_ik, shape (n, n)."""
+        return self.coherence_Z[self.band].mean(axis=0)
+
+
+def band_mask(f, band_hz=BAND_HZ) -> np.ndarray:
+    """True for the bins with ``band_hz[0] < f <= band_hz[1]`` [Hz]."""
+    f = np.asarray(f)
+    return (f > band_hz[0]) & (f <= band_hz[1])
+
+
+def estimate_impedance(trials, *, method="decomposition", band_hz=BAND_HZ,
+                       nperseg=spectral.NPERSEG, noverlap=spectral.NOVERLAP,
+                       nfft=spectral.NFFT, window=spectral.WINDOW,
+                       detrend=spectral.DETREND) -> ImpedanceEstimate:
+    """Estimate the joint impedance matrix from trials.
+
+    Parameters
+    ----------
+    trials : sequence of trialformat.Trial
+        ``decomposition``/``full``: at least one trial per joint with ``perturbed_dof = k``;
+        ``closed_loop``/``direct``: trials with ``perturbed_dof = None``. Several trials of
+        one joint (seeds, repeats) are pooled by averaging their Welch spectra.
+    method : {"decomposition", "full", "closed_loop", "direct"}, keyword-only
+    band_hz : (float, float), keyword-only
+        Evaluation band [Hz] stored with the estimate (used by the accuracy measures).
+    nperseg, noverlap, nfft, window, detrend : keyword-only
+        Welch options (Table IV by default).
+
+    Returns
+    -------
+    ImpedanceEstimate
+
+    Raises
+    ------
+    EstimationError
+        Unknown method, trials of the wrong kind, a joint without a trial, mixed fs or n.
+    """
+    if method not in METHODS:
+        raise EstimationError(f"method must be one of {METHODS}, got {method!r}")
+    trials = list(trials)
+    if not trials:
+        raise EstimationError("no trial given")
+    options = WelchOptions(nperseg=nperseg, noverlap=noverlap, nfft=nfft, window=window,
+                           detrend=detrend)
+    fs, n = _common_rate_and_size(trials)
+    if method in ("decomposition", "full"):
+        f, P, T, cP, cT, nseg = _decomposed_responses(trials, n, fs, options)
+    else:
+        f, P, T, cP, cT, nseg = _mimo_responses(trials, n, fs, options, method)
+    if method == "decomposition":
+        Z = T / np.diagonal(P, axis1=1, axis2=2)[:, None, :]
+    elif method == "direct":
+        Z = T  # _mimo_responses put the theta -> tau_h H1 estimate there
+        T = np.full_like(Z, np.nan)
+    else:
+        Z = np.linalg.solve(np.swapaxes(P, 1, 2), np.swapaxes(T, 1, 2)).swapaxes(1, 2)
+    cZ = cT * np.diagonal(cP, axis1=1, axis2=2)[:, None, :]
+    return ImpedanceEstimate(f=f, Z=Z, P=P, T=T, coherence_P=cP, coherence_T=cT,
+                             coherence_Z=cZ, method=method, fs=fs, band_hz=tuple(band_hz),
+                             n_segments=nseg, trials=[t.name for t in trials])
+
+
+def _common_rate_and_size(trials) -> tuple[float, int]:
+    fs, n = trials[0].fs, trials[0].n_dof
+    for t in trials[1:]:
+        if t.fs != fs or t.n_dof != n:
+            raise EstimationError(f"trial {t.name!r} has fs={t.fs} Hz, n_dof={t.n_dof} but "
+                                  f"trial {trials[0].name!r} has fs={fs} Hz, n_dof={n}")
+    return fs, n
+
+
+def _pooled(trials, fs, options, x_of, y_of):
+    """Welch spectra of x and y pooled over trials, weighted by their segment counts.
+
+    Returns ``(f, Gxx (nf, p, p), Gxy (nf, p, q), Gyy_diag (nf, q), n_segments)``.
+    """
+    total, acc = 0, None
+    for trial in trials:
+        x, y = x_of(trial), y_of(trial)
+        kw = dict(fs=fs, **options.__dict__)
+        f, gxx = spectral.cross_spectrum(x, x, **kw)
+        _, gxy = spectral.cross_spectrum(x, y, **kw)
+        _, gyy = spectral.auto_spectrum(y, **kw)
+        w = options.n_segments(x.shape[0])
+        parts = [w * gxx, w * gxy, w * gyy]
+        acc = parts if acc is None else [a + p for a, p in zip(acc, parts)]
+        total += w
+    gxx, gxy, gyy = (a / total for a in acc)
+    return f, gxx, gxy, gyy, total
+
+
+def _decomposed_responses(trials, n, fs, options):
+    by_joint = {k: [t for t in trials if t.perturbed_dof == k] for k in range(1, n + 1)}
+    others = [t.name for t in trials if t.perturbed_dof is None]
+    if others:
+        raise EstimationError(f"decomposition trials must perturb one joint; trial(s) "
+                              f"{others} have perturbed_dof=null (use method='closed_loop')")
+    missing = [k for k, group in by_joint.items() if not group]
+    if missing:
+        raise EstimationError(f"no trial perturbs joint(s) {missing}: the decomposition "
+                              f"needs one trial per joint 1..{n}, got "
+                              f"{[t.name for t in trials]}")
+    P = T = cP = cT = None
+    segments = []
+    for k, group in by_joint.items():
+        f, gdd, gdy, gyy, nseg = _pooled(
+            group, fs, options, lambda t, k=k: t.tau_delta[:, k - 1:k],
+            lambda t: np.hstack([t.theta, t.tau_h]))
+        if P is None:
+            shape = (f.size, n, n)
+            P, T = np.empty(shape, complex), np.empty(shape, complex)
+            cP, cT = np.empty(shape), np.empty(shape)
+        gdd, gdy = gdd[:, 0, 0].real, gdy[:, 0, :]
+        H = gdy / gdd[:, None]
+        C = spectral.ordinary_coherence(gdy, gdd[:, None], gyy)
+        P[:, :, k - 1], T[:, :, k - 1] = H[:, :n], H[:, n:]
+        cP[:, :, k - 1], cT[:, :, k - 1] = C[:, :n], C[:, n:]
+        segments.append(nseg)
+    return f, P, T, cP, cT, min(segments)
+
+
+def _mimo_responses(trials, n, fs, options, method):
+    single = [t.name for t in trials if t.perturbed_dof is not None]
+    if single:
+        raise EstimationError(f"method {method!r} needs trials with every joint perturbed at "
+                              f"once (perturbed_dof=null); trial(s) {single} perturb one joint")
+    f, gdd, gdy, gyy, nseg = _pooled(trials, fs, options, lambda t: t.tau_delta,
+                                     lambda t: np.hstack([t.theta, t.tau_h]))
+    H = np.swapaxes(np.linalg.solve(gdd, gdy), 1, 2)  # (nf, 2n, n): Y = H D
+    cmult = _multiple_coherence(gdd, gdy, gyy)         # (nf, 2n)
+    P, T = H[:, :n, :], H[:, n:, :]
+    cP = np.repeat(cmult[:, :n, None], n, axis=2)
+    cT = np.repeat(cmult[:, n:, None], n, axis=2)
+    if method == "direct":
+        f, gtt, gty, gyy2, _ = _pooled(trials, fs, options, lambda t: t.theta,
+                                       lambda t: t.tau_h)
+        T = np.swapaxes(np.linalg.solve(gtt, gty), 1, 2)  # theta -> tau_h, (nf, n, n)
+        cT = np.repeat(_multiple_coherence(gtt, gty, gyy2)[:, :, None], n, axis=2)
+        cP = np.broadcast_to(np.eye(n), cT.shape).copy()  # theta is the input: no P path
+        P = np.full_like(T, np.nan)
+    return f, P, T, cP, cT, nseg
+
+
+def _multiple_coherence(gxx, gxy, gyy):
+    """Multiple coherence of each output on all inputs: ``G_yx G_xx^-1 G_xy / G_yy``."""
+    explained = np.einsum("fab,fab->fb", gxy.conj(), np.linalg.solve(gxx, gxy)).real
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = explained / gyy
+    return np.where(gyy > 0, c, 0.0)
