@@ -1,0 +1,7 @@
+"""``python -m orchestrator``: see :mod:`orchestrator.cli`."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

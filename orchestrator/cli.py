@@ -1,0 +1,168 @@
+"""Command line: ``python -m orchestrator`` / ``armimp`` with subcommands.
+
+Only argument parsing lives here; the work is done by library functions. The estimation
+and diagnosis packages add their own subcommands through ``register(subparsers)`` in their
+``cli`` modules, when those modules exist.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+from pathlib import Path
+
+from .errors import SetupError
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not hasattr(args, "func"):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, KeyError, RuntimeError, OSError) as exc:
+        print(f"armimp {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="armimp", description="Arm impedance co-simulation: IMBIC master, trials, grid.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    _add_simulate(sub)
+    _add_grid(sub)
+    _add_info(sub)
+    for module in ("estimation.cli", "diagnosis.cli"):
+        try:
+            mod = importlib.import_module(module)
+        except ImportError:
+            continue
+        register = getattr(mod, "register", None)
+        if register is not None:
+            register(sub)
+    return parser
+
+
+# ----------------------------------------------------------------------------- simulate
+def _add_simulate(sub):
+    p = sub.add_parser("simulate", help="simulate one trial and write NAME.csv/.json")
+    p.add_argument("--out", required=True, help="output stem (NAME, without extension)")
+    p.add_argument("--friction", type=int, default=0, help="declared friction level 0-3")
+    p.add_argument("--resolution", type=int, default=0, help="declared sensor level 0-3")
+    p.add_argument("--perturbation", type=int, default=3, help="perturbation level 1-3")
+    p.add_argument("--dof", default="1", help="perturbed joint (1-based) or 'all'")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--duration", type=float, default=50.0, help="trial length [s]")
+    p.add_argument("--tuning", default="reference", choices=("reference", "robust"))
+    p.add_argument("--no-tde", action="store_true",
+                   help="switch the controller's time-delay estimation off")
+    p.add_argument("--effects", default=None,
+                   help='hidden effects as JSON, e.g. \'{"delay": {"samples": 2}}\'')
+    p.add_argument("--comm-step", type=float, default=None,
+                   help="communication step [s] (default: the control period)")
+    p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
+    p.set_defaults(func=_simulate)
+
+
+def _simulate(args) -> int:
+    from trialformat import write_trial
+
+    from .setup import Setup
+    from .trial import simulate_trial
+
+    dof = None if args.dof == "all" else _int(args.dof, "--dof")
+    effects = _json(args.effects, "--effects")
+    setup = Setup.reference(args.friction, args.resolution, args.tuning)
+    if args.no_tde:
+        setup = setup.with_controller(time_delay_estimation=False)
+    trial = simulate_trial(setup, perturbed_dof=dof, level=args.perturbation, seed=args.seed,
+                           duration_s=args.duration, effects=effects, plant=args.fmu,
+                           communication_step_s=args.comm_step, name=Path(args.out).name)
+    path = write_trial(args.out, trial)
+    print(f"wrote {path} ({trial.n_samples} samples)")
+    return 0
+
+
+# ----------------------------------------------------------------------------- grid
+def _add_grid(sub):
+    p = sub.add_parser("grid", help="run the paper grid (48 conditions x 2 joints)")
+    p.add_argument("out", help="output folder (re-running skips completed trials)")
+    p.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    p.add_argument("--scheduler", default=None,
+                   help="Dask distributed scheduler address (e.g. tcp://127.0.0.1:8786)")
+    p.add_argument("--duration", type=float, default=50.0, help="trial length [s]")
+    p.add_argument("--friction", type=int, nargs="+", default=[0, 1, 2, 3])
+    p.add_argument("--resolution", type=int, nargs="+", default=[0, 1, 2, 3])
+    p.add_argument("--perturbation", type=int, nargs="+", default=[1, 2, 3])
+    p.add_argument("--dofs", type=int, nargs="+", default=[1, 2])
+    p.add_argument("--seed", type=int, default=0, help="base seed")
+    p.add_argument("--tuning", default="reference", choices=("reference", "robust"))
+    p.add_argument("--effects", default=None, help="hidden effects as JSON")
+    p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_grid)
+
+
+def _grid(args) -> int:
+    from .grid import run_grid
+
+    manifest = run_grid(args.out, workers=args.workers, scheduler=args.scheduler,
+                        progress=not args.no_progress, friction_levels=args.friction,
+                        resolution_levels=args.resolution,
+                        perturbation_levels=args.perturbation, dofs=args.dofs,
+                        duration_s=args.duration, base_seed=args.seed, tuning=args.tuning,
+                        effects=_json(args.effects, "--effects"), fmu_path=args.fmu)
+    print(f"grid: {manifest['n_done']} done, {manifest['n_skipped']} skipped, "
+          f"{manifest['n_failed']} failed in {manifest['wall_s']:.1f} s -> {args.out}")
+    for r in manifest["trials"]:
+        if r["status"] == "failed":
+            print(f"  FAILED {r['name']}: {r['error']}")
+    return 1 if manifest["n_failed"] else 0
+
+
+# ----------------------------------------------------------------------------- info
+def _add_info(sub):
+    p = sub.add_parser("info", help="check a plant FMU's contract and list its parameters")
+    p.add_argument("fmu", nargs="?", default=None, help="plant FMU (default: reference)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_info)
+
+
+def _info(args) -> int:
+    from .plant import Plant
+    from .trial import default_fmu_path
+
+    path = args.fmu if args.fmu is not None else default_fmu_path()
+    with Plant(path) as plant:
+        info = plant.describe()
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"{info['file']}: model {info['model_name']}, GUID {info['guid']}, "
+          f"generated by {info['generation_tool'] or '?'}")
+    print(f"contract: OK, {info['n_dof']} joints (tau_m, theta, tau_h"
+          f"{', omega' if info['has_omega'] else ''})")
+    print(f"parameters ({len(info['parameters'])}):")
+    for name, value in info["parameters"].items():
+        print(f"  {name} = {value}")
+    return 0
+
+
+def _int(text, option):
+    try:
+        return int(text)
+    except ValueError:
+        raise SetupError(f"{option} must be an integer or 'all', got {text!r}") from None
+
+
+def _json(text, option):
+    if text is None:
+        return None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SetupError(f"{option} is not valid JSON: {exc}") from None

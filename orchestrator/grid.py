@@ -1,0 +1,194 @@
+"""The paper grid (reference.md section 9): 4 friction x 4 resolution x 3 perturbation
+levels x one trial per joint, run in parallel, resumable, failures reported.
+
+Seeds: the perturbation of a trial depends only on its perturbation level P and joint k,
+``seed = base_seed + 10 * P + k``, so the 16 friction/resolution conditions at one level
+and joint see the same tau_delta and differ only by the factor.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+import traceback
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
+from pathlib import Path
+
+from tqdm import tqdm
+
+from trialformat import trial_exists, write_trial
+
+from .errors import SetupError
+
+GRID_FORMAT = "arm-impedance-grid/1"
+MANIFEST = "grid.json"
+FAILURES = "failures.json"
+
+
+def trial_name(friction_level, resolution_level, perturbation_level, dof) -> str:
+    """``fric{F}_res{R}_pert{P}_dof{k}``."""
+    return f"fric{friction_level}_res{resolution_level}_pert{perturbation_level}_dof{dof}"
+
+
+def grid_tasks(*, friction_levels=(0, 1, 2, 3), resolution_levels=(0, 1, 2, 3),
+               perturbation_levels=(1, 2, 3), dofs=(1, 2), duration_s=50.0, base_seed=0,
+               tuning="reference", effects=None, fmu_path=None) -> list:
+    """The grid's trials as plain dicts (picklable task descriptions)."""
+    tasks = []
+    for f in friction_levels:
+        for r in resolution_levels:
+            for p in perturbation_levels:
+                for k in dofs:
+                    tasks.append({"name": trial_name(f, r, p, k), "friction_level": f,
+                                  "resolution_level": r, "perturbation_level": p,
+                                  "perturbed_dof": k, "seed": base_seed + 10 * p + k,
+                                  "duration_s": duration_s, "tuning": tuning,
+                                  "effects": effects,
+                                  "fmu_path": None if fmu_path is None else str(fmu_path)})
+    return tasks
+
+
+def run_grid_task(task: dict, out_dir: str) -> dict:
+    """Simulate and write one grid trial; never raises (a failure is returned)."""
+    from .setup import Setup
+    from .trial import simulate_trial
+
+    start = time.perf_counter()
+    result = {k: v for k, v in task.items() if k != "fmu_path"}
+    try:
+        setup = Setup.reference(task["friction_level"], task["resolution_level"],
+                                task["tuning"])
+        trial = simulate_trial(setup, perturbed_dof=task["perturbed_dof"],
+                               level=task["perturbation_level"], seed=task["seed"],
+                               duration_s=task["duration_s"], effects=task["effects"],
+                               plant=task["fmu_path"], name=task["name"])
+        write_trial(Path(out_dir) / task["name"], trial)
+        result["status"] = "done"
+    except Exception as exc:  # one failed trial must not stop the grid
+        result.update(status="failed", error=f"{type(exc).__name__}: {exc}",
+                      traceback=traceback.format_exc(limit=4))
+    result["wall_s"] = round(time.perf_counter() - start, 3)
+    return result
+
+
+def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_options) -> dict:
+    """Run the paper grid into ``out_dir``; skip trials already written.
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the trials (``fric{F}_res{R}_pert{P}_dof{k}.csv/.json``), the manifest
+        ``grid.json`` and ``failures.json``.
+    workers : int
+        Local processes (1: run in this process). Ignored with ``scheduler``.
+    scheduler : str, optional
+        Address of a Dask distributed scheduler (e.g. ``tcp://127.0.0.1:8786``), or a
+        ``distributed.Client``.
+    progress : bool
+        Show a tqdm progress bar.
+    **grid_options
+        Passed to :func:`grid_tasks` (levels, dofs, duration_s, base_seed, tuning,
+        effects, fmu_path).
+
+    Returns
+    -------
+    dict
+        The manifest: every trial's condition, seed, status (done, skipped, failed) and
+        wall time; failures also in ``failures.json``.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tasks = grid_tasks(**grid_options)
+    if grid_options.get("fmu_path") is None:
+        from .trial import default_fmu_path
+        path = str(default_fmu_path())  # build once here, not in every worker
+        for t in tasks:
+            t["fmu_path"] = path
+    results = {}
+    todo = []
+    for t in tasks:
+        if trial_exists(out / t["name"]):
+            results[t["name"]] = {**{k: v for k, v in t.items() if k != "fmu_path"},
+                                  "status": "skipped"}
+        else:
+            todo.append(t)
+    start = time.perf_counter()
+    bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc="grid", unit="trial",
+               disable=not progress)
+    try:
+        for res in _execute(todo, str(out), workers, scheduler):
+            results[res["name"]] = res
+            bar.update(1)
+            if res["status"] == "failed":
+                bar.write(f"FAILED {res['name']}: {res['error']}")
+    finally:
+        bar.close()
+    manifest = _manifest(tasks, results, grid_options, time.perf_counter() - start)
+    _write_json(out / MANIFEST, manifest)
+    _write_json(out / FAILURES, {"failures": [r for r in manifest["trials"]
+                                              if r["status"] == "failed"]})
+    return manifest
+
+
+def _execute(tasks, out_dir, workers, scheduler):
+    if not tasks:
+        return
+    if scheduler is not None:
+        yield from _execute_dask(tasks, out_dir, scheduler)
+    elif workers is None or workers < 1:
+        raise SetupError(f"workers must be >= 1, got {workers!r}")
+    elif workers == 1:
+        for t in tasks:
+            yield run_grid_task(t, out_dir)
+    else:
+        # spawn: workers start clean (no inherited FMU instances or threads)
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as ex:
+            futures = [ex.submit(run_grid_task, t, out_dir) for t in tasks]
+            for fut in as_completed(futures):
+                yield fut.result()
+
+
+def _execute_dask(tasks, out_dir, scheduler):
+    from distributed import Client, as_completed as dask_completed
+
+    client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+    try:
+        futures = [client.submit(run_grid_task, t, out_dir, pure=False, key=f"grid-{t['name']}")
+                   for t in tasks]
+        for fut in dask_completed(futures):
+            yield fut.result()
+    finally:
+        if client is not scheduler:
+            client.close()
+
+
+def _manifest(tasks, results, grid_options, wall_s) -> dict:
+    trials = [results[t["name"]] for t in tasks]
+    for r in trials:
+        r.pop("traceback", None) if r["status"] != "failed" else None
+    options = {k: (list(v) if isinstance(v, tuple) else v) for k, v in grid_options.items()
+               if k != "fmu_path"}
+    if grid_options.get("fmu_path") is not None:
+        options["fmu"] = Path(grid_options["fmu_path"]).name
+    return {"format": GRID_FORMAT,
+            "seeds": "seed = base_seed + 10 * perturbation_level + perturbed_dof",
+            "options": options, "n_trials": len(trials),
+            "n_done": sum(r["status"] == "done" for r in trials),
+            "n_skipped": sum(r["status"] == "skipped" for r in trials),
+            "n_failed": sum(r["status"] == "failed" for r in trials),
+            "wall_s": round(wall_s, 3), "trials": trials}
+
+
+def _write_json(path: Path, data) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(data, fh, indent=2)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

@@ -1,0 +1,238 @@
+"""One simulated trial: set-up + perturbation + hidden effects -> trialformat.Trial."""
+
+from __future__ import annotations
+
+import copy
+import os
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from trialformat import Trial
+from trialformat import reference as ref
+
+from .controller import IMBIC
+from .effects import parse_effects
+from .errors import SetupError
+from .master import (DelayLine, Recorder, Sampler, check_angles, decimation, run_closed_loop,
+                     run_open_loop)
+from .perturbation import make_perturbation
+from .plant import Plant
+
+_local = threading.local()
+
+
+def default_fmu_path() -> Path:
+    """The reference C plant (package ``fmus``), built on first use."""
+    try:
+        import fmus
+    except ImportError as exc:  # the orchestrator can run other plants without it
+        raise SetupError("no plant given and the reference plant package 'fmus' is not "
+                         "importable; pass plant=<path to an FMU>") from exc
+    return Path(fmus.default_fmu_path(build_if_missing=True))
+
+
+def get_plant(path=None) -> Plant:
+    """A Plant for ``path`` (default: the reference FMU), cached per thread and reused
+    across trials (each trial resets it). A rebuilt file (new mtime/size) is reloaded."""
+    path = Path(path) if path is not None else default_fmu_path()
+    stat = path.stat() if path.is_file() else None
+    key = (str(path.resolve()), stat and (stat.st_mtime_ns, stat.st_size))
+    cache = getattr(_local, "plants", None)
+    if cache is None:
+        cache = _local.plants = {}
+    if key not in cache:
+        cache[key] = Plant(path)
+    return cache[key]
+
+
+def _resolve_plant(plant) -> Plant:
+    return plant if isinstance(plant, Plant) else get_plant(plant)
+
+
+def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
+                   duration_s=50.0, effects=None, plant=None, parameters=None,
+                   communication_step_s=None, name="") -> Trial:
+    """Simulate one trial of the closed loop (IMBIC at the control rate on a plant FMU).
+
+    Parameters
+    ----------
+    setup : Setup
+        Declared set-up (goes into the metadata) and the simulated arm.
+    perturbed_dof : int or None
+        1-based joint perturbed alone (decomposition masking), or None for all joints.
+    perturbation : ndarray (N, n) [N m], optional
+        Overrides ``level``/``seed``/``duration_s`` (its length sets N).
+    level : int
+        Perturbation level 1-3.
+    seed : int
+        Seed of the perturbation; the sensor noise uses the stream ``(seed, 1)``.
+    duration_s : float [s]
+        Trial length (N = duration_s * fs samples).
+    effects : dict, optional
+        Catalogue effects simulated but not declared (docs/spec/effects.md).
+    plant : Plant or path, optional
+        The plant FMU (default: the reference C plant, one cached instance per thread).
+    parameters : dict, optional
+        Extra FMU parameters by name (refused when the plant lacks one).
+    communication_step_s : float [s], optional
+        Communication step (default: the control period); it must divide the period.
+    name : str
+        Trial name (used in error messages and as ``Trial.name``).
+
+    Returns
+    -------
+    trialformat.Trial
+        Declared set-up in the standard keys; what was really simulated under
+        ``meta["simulation"]``.
+
+    Raises
+    ------
+    SetupError, EffectError, ParameterError, RateError, ContractError
+        Bad input, named.
+    DivergenceError
+        The loop diverged (no trial is returned).
+    FMUCallError
+        The plant reported an error.
+    """
+    n, fs, ts = setup.n_dof, setup.fs, setup.Ts
+    tau_delta, pert_meta = _perturbation(setup, perturbed_dof, perturbation, level, seed,
+                                         duration_s)
+    hidden = parse_effects(effects, n)
+    plant = _resolve_plant(plant)
+    if plant.n_dof != n:
+        raise SetupError(f"plant {plant.path.name} has {plant.n_dof} joints, the set-up {n}")
+    n_dec = decimation(ts, communication_step_s)
+    required = dict(hidden.plant_parameters)
+    required.update(parameters or {})
+    absent = plant.start(required, optional=setup.plant_parameters())
+
+    sampler, noise_seed = _sampler(setup, hidden, seed, tau_delta.shape[0])
+    controller = IMBIC(setup.controller_config(), perturbed_dof)
+    delay = DelayLine(hidden.delay_samples, n) if hidden.delay_samples else None
+    recorder = Recorder(("measured", "tau_m"))
+    condition = _condition(name, setup, perturbed_dof, pert_meta, hidden.normalized)
+    run_closed_loop(plant.io, controller, sampler, tau_delta.tolist(), recorder,
+                    control_period=ts, n_decimation=n_dec, delay=delay, condition=condition)
+    rec = recorder.arrays()
+    rec = {"tau_delta": tau_delta, "theta": rec["measured"][:, :n],
+           "tau_h": rec["measured"][:, n:], "tau_m": rec["tau_m"]}
+    check_angles(rec["theta"], condition, ts)
+
+    meta = setup.to_metadata()
+    meta.update(perturbed_dof=perturbed_dof, perturbation=pert_meta,
+                source=f"simulated: orchestrator IMBIC master on plant FMU {plant.model_name}")
+    meta["simulation"] = {
+        "simulator": "orchestrator",
+        "fmu": {"file": plant.path.name, "model_name": plant.model_name, "guid": plant.guid,
+                "generation_tool": plant.generation_tool},
+        "arm": setup.arm_metadata(),
+        "effects": copy.deepcopy(hidden.normalized),
+        "rk4_step": plant.parameters.get("rk4_step") if "rk4_step" not in required
+        else required["rk4_step"],
+        "communication_step_s": ts / n_dec,
+        "parameters": required,
+        "declared_parameters_not_in_plant": absent,
+        "seed": pert_meta.get("seed"),
+        "noise_seed": noise_seed,
+    }
+    t = np.arange(tau_delta.shape[0]) / fs
+    return Trial(meta=meta, t=t, name=name, **rec)
+
+
+def _perturbation(setup, perturbed_dof, perturbation, level, seed, duration_s):
+    n, fs = setup.n_dof, setup.fs
+    if perturbed_dof is not None and (isinstance(perturbed_dof, bool)
+                                      or not isinstance(perturbed_dof, (int, np.integer))
+                                      or not 1 <= perturbed_dof <= n):
+        raise SetupError(f"perturbed_dof must be None or an integer in 1..{n}, "
+                         f"got {perturbed_dof!r}")
+    spec = ref.reference()["perturbation"]
+    if perturbation is None:
+        if not duration_s > 0:
+            raise SetupError(f"duration_s must be > 0, got {duration_s!r}")
+        n_samples = int(round(duration_s * fs))
+        tau_delta = make_perturbation(level, seed, n_samples, n, fs, perturbed_dof)
+        meta = {"level": level, "peak": ref.perturbation_peak(level), "seed": seed,
+                "cutoff_hz": spec["cutoff_hz"], "order": spec["butterworth_order"]}
+        return tau_delta, meta
+    tau_delta = np.array(perturbation, dtype=float)
+    if tau_delta.ndim != 2 or tau_delta.shape[1] != n or not np.all(np.isfinite(tau_delta)):
+        raise SetupError(f"perturbation must be a finite (N, {n}) array, got shape "
+                         f"{tau_delta.shape}")
+    if perturbed_dof is not None:
+        others = np.delete(tau_delta, perturbed_dof - 1, axis=1)
+        if np.any(others):
+            raise SetupError(f"perturbation has non-zero columns besides the perturbed joint "
+                             f"{perturbed_dof}")
+    meta = {"level": None, "peak": np.max(np.abs(tau_delta), axis=0).tolist(), "seed": None,
+            "custom": True}
+    return tau_delta, meta
+
+
+def _sampler(setup, hidden, seed, n_samples):
+    enc_deg = (setup.sensors["encoder_resolution_deg"] if hidden.encoder_resolution_deg is None
+               else hidden.encoder_resolution_deg)
+    tau_res = (setup.sensors["torque_resolution_nm"] if hidden.torque_resolution_nm is None
+               else hidden.torque_resolution_nm)
+    theta_noise = tau_noise = noise_seed = None
+    if any(hidden.theta_noise_std) or any(hidden.tau_noise_std):
+        noise_seed = [int(seed), 1]
+        rng = np.random.default_rng(noise_seed)
+        n = setup.n_dof
+        theta_noise = rng.standard_normal((n_samples, n)) * np.asarray(hidden.theta_noise_std)
+        tau_noise = rng.standard_normal((n_samples, n)) * np.asarray(hidden.tau_noise_std)
+    sampler = Sampler(setup.n_dof, np.radians(float(enc_deg)), float(tau_res),
+                      theta_noise, tau_noise)
+    return sampler, noise_seed
+
+
+def _condition(name, setup, perturbed_dof, pert_meta, effects) -> str:
+    levels = setup.levels
+    parts = [name] if name else []
+    if levels:
+        parts.append(f"friction level {levels.get('friction_level')}, resolution level "
+                     f"{levels.get('resolution_level')}")
+    parts.append(f"perturbation level {pert_meta.get('level')}, seed {pert_meta.get('seed')}, "
+                 f"perturbed_dof {perturbed_dof}, tuning {setup.controller.get('tuning')}")
+    if effects:
+        parts.append(f"effects {effects}")
+    return "[" + "; ".join(parts) + "]"
+
+
+def simulate_plant(setup, tau_applied, *, plant=None, effects=None, parameters=None,
+                   communication_step_s=None) -> dict:
+    """Step the plant alone under a torque history (no controller, no sampler).
+
+    Parameters
+    ----------
+    setup : Setup
+    tau_applied : ndarray (N, n) [N m]
+        Torque held over each control period.
+    plant, effects, parameters, communication_step_s
+        As in :func:`simulate_trial` (only plant-side effects apply).
+
+    Returns
+    -------
+    dict
+        ``theta``, ``tau_h`` (N, n) plant outputs at each sample (before its torque acts).
+    """
+    plant = _resolve_plant(plant)
+    hidden = parse_effects(effects, setup.n_dof)
+    required = dict(hidden.plant_parameters)
+    required.update(parameters or {})
+    plant.start(required, optional=setup.plant_parameters())
+    recorder = Recorder(("outputs",))
+    run_open_loop(plant.io, np.asarray(tau_applied, dtype=float).tolist(), recorder,
+                  control_period=setup.Ts,
+                  n_decimation=decimation(setup.Ts, communication_step_s))
+    out = recorder.arrays()["outputs"]
+    n = setup.n_dof
+    return {"theta": out[:, :n], "tau_h": out[:, n:2 * n]}
+
+
+def write_simulated_trial(stem, trial) -> Path:
+    """Write a trial atomically (trialformat.write_trial); return the CSV path."""
+    from trialformat import write_trial
+    return write_trial(os.fspath(stem), trial)
