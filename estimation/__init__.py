@@ -3,8 +3,8 @@
 Stands alone: imports only trialformat, numpy, scipy and matplotlib. See docs/estimation.md.
 """
 
-from .accuracy import (SecondOrderFit, fit_second_order, left_limit_delay, true_impedance,
-                       vaf)
+from .accuracy import (SecondOrderFit, corrected_impedance, fit_impedance, fit_second_order,
+                       left_limit_delay, true_impedance, vaf)
 from .conditions import Condition, condition_of, evaluate, group_conditions
 from .errors import EstimationError, MatFileError
 from .estimator import METHODS, ImpedanceEstimate, band_mask, estimate_impedance
@@ -13,7 +13,7 @@ from .matlab import read_trial_mat, write_trial_mat
 from .spectral import (auto_spectrum, coherence, cross_spectrum, frequency_response,
                        ordinary_coherence)
 
-__all__ = ["SecondOrderFit", "fit_second_order", "left_limit_delay", "true_impedance", "vaf",
+__all__ = ["SecondOrderFit", "corrected_impedance", "fit_impedance", "fit_second_order", "left_limit_delay", "true_impedance", "vaf",
            "Condition", "condition_of", "evaluate", "group_conditions", "EstimationError",
            "MatFileError", "METHODS", "ImpedanceEstimate", "band_mask", "estimate_impedance",
            "read_trial", "read_trials", "read_trial_mat", "write_trial_mat", "auto_spectrum",

@@ -163,3 +163,101 @@ def _fit_one(basis, z, weighting, confidence):
     zc = np.sum(wt ** 2 * z) / np.sum(wt ** 2)
     r2 = 1.0 - (resid @ resid) / np.sum(wt ** 2 * np.abs(z - zc) ** 2)
     return (*theta, *half, r2)
+
+
+def fit_impedance(estimate, *, inertia_delay_s=0.0, leakage=True, weighting="relative",
+                  confidence=0.95) -> SecondOrderFit:
+    """Fit M, B, K (n x n) to an estimate, optionally removing Welch's window leakage.
+
+    The model of the raw estimate ``Zhat = T P^-1`` (decomposition/full/closed-loop) is,
+    per frequency, with ``L1 = P1 P^-1``, ``L2 = P2 P^-1`` (window-derivative responses)::
+
+        Zhat ~ K + B (jw I - L1) + M ((jw)^2 exp(-j w tau) I - 2 jw L1 + L2)
+
+    exact for a continuous second-order arm under a Hann window (docs/estimation.md); the
+    L terms are what the window's edges leak. ``leakage=False`` drops them, and the fit is
+    then :func:`fit_second_order` element by element. Each row i of (M, B, K) is one
+    linear least-squares problem over the n columns k, bins weighted by ``1/|Zhat_ik|``;
+    R^2 and confidence intervals as in :func:`fit_second_order`, per element.
+
+    Parameters
+    ----------
+    estimate : ImpedanceEstimate
+    inertia_delay_s : float [s], keyword-only
+        tau of the left-limit sampling model (:func:`left_limit_delay`), 0 for none.
+    leakage : bool, keyword-only
+        Model (and so remove) the window leakage. Needs ``estimate.P1``, ``estimate.P2``
+        (not available for the ``direct`` method).
+    """
+    if weighting not in ("relative", "none"):
+        raise EstimationError(f"weighting must be 'relative' or 'none', got {weighting!r}")
+    if not leakage:
+        return fit_second_order(estimate.f, estimate.Z, band_hz=estimate.band_hz,
+                                inertia_delay_s=inertia_delay_s, weighting=weighting,
+                                confidence=confidence)
+    if not np.all(np.isfinite(estimate.P1)):
+        raise EstimationError(f"method {estimate.method!r} gives no window-leakage responses;"
+                              f" use leakage=False")
+    b = estimate.band
+    Z, (AM, AB, AK) = estimate.Z[b], _leakage_regressors(estimate, inertia_delay_s)
+    n = estimate.n_dof
+    out = {k: np.zeros((n, n)) for k in ("M", "B", "K", "M_ci", "B_ci", "K_ci", "r2")}
+    for i in range(n):
+        wts = [1.0 / np.abs(Z[:, i, k]) if weighting == "relative" else np.ones(len(Z))
+               for k in range(n)]
+        cols = [np.concatenate([A[:, j, k] * wts[k] for k in range(n)])
+                for A in (AM, AB, AK) for j in range(n)]
+        A = np.stack(cols, axis=1)
+        y = np.concatenate([Z[:, i, k] * wts[k] for k in range(n)])
+        A, y_r = np.vstack([A.real, A.imag]), np.concatenate([y.real, y.imag])
+        theta, *_ = np.linalg.lstsq(A, y_r, rcond=None)
+        resid = y_r - A @ theta
+        dof = y_r.size - theta.size
+        cov = np.linalg.inv(A.T @ A) * (resid @ resid) / dof
+        half = stats.t.ppf(0.5 + confidence / 2, dof) * np.sqrt(np.diag(cov))
+        for p, name in enumerate(("M", "B", "K")):
+            out[name][i] = theta[p * n:(p + 1) * n]
+            out[f"{name}_ci"][i] = half[p * n:(p + 1) * n]
+        res_c = (resid[:y.size] + 1j * resid[y.size:]).reshape(n, -1)
+        for k in range(n):
+            z, wt = Z[:, i, k], wts[k]
+            zc = np.sum(wt ** 2 * z) / np.sum(wt ** 2)
+            out["r2"][i, k] = 1 - np.sum(np.abs(res_c[k]) ** 2) / np.sum(wt ** 2 * np.abs(z - zc) ** 2)
+    return SecondOrderFit(confidence=confidence, inertia_delay_s=inertia_delay_s, **out)
+
+
+def corrected_impedance(estimate, fit, *, leakage=True) -> np.ndarray:
+    """The band part of ``estimate.Z`` with the modelled sampling (and leakage) terms removed.
+
+    ``Zhat - M (jw)^2 (exp(-j w tau) - 1) [- (B (-L1) + M (-2 jw L1 + L2))]`` with the fitted
+    M, B and ``tau = fit.inertia_delay_s``: what the continuous arm would give, if the
+    models hold. Shape (nb, n, n) over ``estimate.band``.
+    """
+    b = estimate.band
+    jw = 1j * 2 * np.pi * estimate.f[b][:, None, None]
+    Z = estimate.Z[b] - fit.M @ ((jw ** 2) * (np.exp(-jw * fit.inertia_delay_s) - 1)
+                                 * np.eye(estimate.n_dof))
+    if leakage:
+        L1, L2 = _leakage_matrices(estimate)
+        Z = Z + fit.B @ L1 - fit.M @ (-2 * jw * L1 + L2)
+    return Z
+
+
+def _leakage_matrices(estimate):
+    b = estimate.band
+    P, P1, P2 = estimate.P[b], estimate.P1[b], estimate.P2[b]
+    if estimate.method == "decomposition":  # Z = T / R_kk: only the diagonal responses
+        P, P1, P2 = (np.einsum("fkk->fk", a)[:, :, None] * np.eye(a.shape[1])
+                     for a in (P, P1, P2))
+    Pinv = np.linalg.inv(P)
+    return P1 @ Pinv, P2 @ Pinv
+
+
+def _leakage_regressors(estimate, delay):
+    """(A_M, A_B, A_K), each (nb, n, n): Zhat ~ M A_M + B A_B + K A_K (matrix products)."""
+    L1, L2 = _leakage_matrices(estimate)
+    jw = 1j * 2 * np.pi * estimate.f[estimate.band][:, None, None]
+    eye = np.eye(estimate.n_dof)
+    AM = (jw ** 2) * np.exp(-jw * delay) * eye - 2 * jw * L1 + L2
+    AB = jw * eye - L1
+    return AM, AB, np.broadcast_to(eye, AM.shape)

@@ -26,9 +26,10 @@ def register(subparsers) -> None:
                                           "(.csv+.json or .mat) and print the fit.")
     p.add_argument("source", nargs="+", help="folder of trials, or trial files")
     p.add_argument("--method", choices=METHODS, default="decomposition")
-    p.add_argument("--compensate", action="store_true",
-                   help="compensate the left-limit sampling of tau_h (half-sample delay "
-                        "of the inertial term)")
+    p.add_argument("--raw", action="store_true",
+                   help="plain fit: no compensation of the left-limit sampling of tau_h and "
+                        "no removal of the Welch window leakage (both on by default; the "
+                        "leakage removal needs a perturbation-based method)")
     p.add_argument("--truth", choices=("none", "table1"), default="none",
                    help="compare with Table I (simulated trials); 'none' for lab data: VAF "
                         "against the fitted second-order model")
@@ -41,8 +42,9 @@ def register(subparsers) -> None:
     p.add_argument("folder", type=Path)
     p.add_argument("--out", type=Path, required=True, help="report folder")
     p.add_argument("--truth", choices=("none", "table1"), default="table1")
-    p.add_argument("--fig-method", choices=METHODS, default="decomposition",
-                   help="estimator shown in Figs. 2-4")
+    p.add_argument("--fig-variant", default="decomposition",
+                   help="variant shown in Figs. 2-4 (estimation.conditions.VARIANTS names; "
+                        "Fig. 2 shows that variant's raw estimate)")
     p.set_defaults(func=run_figures)
 
 
@@ -52,8 +54,9 @@ def run_estimate(args) -> int:
     arm = ref.arm_matrices() if args.truth == "table1" else None
     results = []
     for cond, group in group_conditions(trials).items():
-        rows = evaluate(group, truth=arm,
-                        variants=[(args.method, args.method, args.compensate)])
+        corrected = not args.raw
+        rows = evaluate(group, truth=arm, variants=[(
+            args.method, args.method, corrected, corrected and args.method != "direct")])
         if not rows:
             print(f"{cond.label} ({cond.tuning}): no trials suited to method "
                   f"{args.method!r}", file=sys.stderr)
@@ -69,7 +72,7 @@ def run_estimate(args) -> int:
 
 def _describe(cond, row, has_truth) -> str:
     lines = [f"{cond.label} tuning={cond.tuning} method={row['variant']} "
-             f"compensated={row['compensated']}"]
+             f"sampling_compensated={row['compensated']} leakage_removed={row['leakage_removed']}"]
     for e in ("11", "12", "21", "22"):
         text = (f"  Z{e}: M={row[f'M_{e}']:.4f}±{row[f'M_ci_{e}']:.4f} "
                 f"B={row[f'B_{e}']:.4f}±{row[f'B_ci_{e}']:.4f} "
@@ -83,7 +86,7 @@ def _describe(cond, row, has_truth) -> str:
 
 
 def run_figures(args) -> int:
-    result = make_report(args.folder, args.out, truth=args.truth, fig2_method=args.fig_method)
+    result = make_report(args.folder, args.out, truth=args.truth, variant=args.fig_variant)
     for f in result["files"]:
         print(f)
     return 0

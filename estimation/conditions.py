@@ -13,17 +13,22 @@ import numpy as np
 
 from trialformat import reference as ref
 
-from .accuracy import fit_second_order, left_limit_delay, true_impedance, vaf
+from .accuracy import (corrected_impedance, fit_impedance, left_limit_delay, true_impedance,
+                       vaf)
 from .estimator import estimate_impedance
 
-#: (name, estimator method, sampling compensation) evaluated per condition when possible.
+#: (name, estimator method, sampling compensation, leakage removal), evaluated per
+#: condition when the trials allow. "*_corrected" = both corrections (docs/estimation.md).
 VARIANTS = (
-    ("decomposition", "decomposition", False),
-    ("decomposition+comp", "decomposition", True),
-    ("full", "full", False),
-    ("full+comp", "full", True),
-    ("closed_loop+comp", "closed_loop", True),
-    ("direct+comp", "direct", True),
+    ("decomposition", "decomposition", False, False),
+    ("decomposition_corrected", "decomposition", True, True),
+    ("full", "full", False, False),
+    ("full_sampling", "full", True, False),
+    ("full_corrected", "full", True, True),
+    ("closed_loop", "closed_loop", False, False),
+    ("closed_loop_corrected", "closed_loop", True, True),
+    ("direct", "direct", False, False),
+    ("direct_sampling", "direct", True, False),
 )
 
 
@@ -85,7 +90,7 @@ def evaluate(trials, *, truth=None, variants=VARIANTS, band_hz=(0.0, 15.0)) -> l
     truth : (M, B, K) or None
         True arm matrices. None (lab data): VAF is computed against the fitted
         second-order model, and parameter errors are not given.
-    variants : sequence of (name, method, compensate)
+    variants : sequence of (name, method, compensate_sampling, remove_leakage)
 
     Returns
     -------
@@ -98,29 +103,34 @@ def evaluate(trials, *, truth=None, variants=VARIANTS, band_hz=(0.0, 15.0)) -> l
     has_single = any(t.perturbed_dof is not None for t in trials)
     has_all = any(t.perturbed_dof is None for t in trials)
     rows, cache = [], {}
-    for name, method, compensate in variants:
+    for name, method, compensate, leakage in variants:
         needs_single = method in ("decomposition", "full")
         if (needs_single and not has_single) or (not needs_single and not has_all):
             continue
         use = [t for t in trials if (t.perturbed_dof is not None) == needs_single]
         if method not in cache:
             cache[method] = estimate_impedance(use, method=method, band_hz=band_hz)
-        rows.append(score(cache[method], truth=truth, compensate=compensate, name=name))
+        rows.append(score(cache[method], truth=truth, compensate=compensate,
+                          leakage=leakage, name=name))
     return rows
 
 
-def score(est, *, truth=None, compensate=False, name="") -> dict:
-    """Accuracy and reliability of one estimate (see :func:`evaluate`)."""
+def score(est, *, truth=None, compensate=False, leakage=False, name="") -> dict:
+    """Accuracy and reliability of one estimate (see :func:`evaluate`).
+
+    VAF is that of the raw estimate, or with corrections of the corrected estimate
+    (:func:`estimation.accuracy.corrected_impedance`).
+    """
     delay = left_limit_delay(est.fs) if compensate else 0.0
-    fit = fit_second_order(est.f, est.Z, band_hz=est.band_hz, inertia_delay_s=delay)
+    fit = fit_impedance(est, inertia_delay_s=delay, leakage=leakage)
     b = est.band
-    Z = compensated_impedance(est.f[b], est.Z[b], fit) if compensate else est.Z[b]
+    Z = corrected_impedance(est, fit, leakage=leakage) if (compensate or leakage) else est.Z[b]
     if truth is None:
         reference_Z = true_impedance(est.f[b], fit.M, fit.B, fit.K)
     else:
         reference_Z = true_impedance(est.f[b], *truth)
     row = {"variant": name or est.method, "method": est.method, "compensated": compensate,
-           "n_segments": est.n_segments}
+           "leakage_removed": leakage, "n_segments": est.n_segments}
     per = {"vaf": vaf(Z, reference_Z), "r2": fit.r2, "coh": est.mean_coherence(),
            "M": fit.M, "B": fit.B, "K": fit.K, "M_ci": fit.M_ci, "B_ci": fit.B_ci,
            "K_ci": fit.K_ci}
@@ -137,13 +147,3 @@ def score(est, *, truth=None, compensate=False, name="") -> dict:
     if truth is not None:
         row.update({f"err_{p}_max": float(np.abs(per[f"err_{p}"]).max()) for p in "MBK"})
     return row
-
-
-def compensated_impedance(f, Z, fit) -> np.ndarray:
-    """Remove the modelled left-limit sampling term from Z with the fitted M [N m/rad].
-
-    ``Z_comp = Z + M w^2 (exp(-j w tau) - 1)``, tau = ``fit.inertia_delay_s``: the
-    estimate as the continuous arm would give it, if the sampling model holds.
-    """
-    w = 2 * np.pi * np.asarray(f, float).reshape((-1,) + (1,) * np.ndim(fit.M))
-    return Z + fit.M * w ** 2 * (np.exp(-1j * w * fit.inertia_delay_s) - 1)

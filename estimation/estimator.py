@@ -53,6 +53,11 @@ class ImpedanceEstimate:
         Ordinary coherence of each SIMO path d_k -> theta_i, d_k -> tau_h_i (decomposition
         trials), or multiple coherence of the output on all inputs (all-joints trials;
         then equal along k).
+    P1, P2 : ndarray, complex, shape (nf, n, n)
+        Window-leakage responses: as P, with the angle windowed by the first and second
+        time derivatives of the Hann window [rad/(N m s)], [rad/(N m s^2)]
+        (:func:`estimation.spectral.window_derivative_spectra`); NaN for ``direct``.
+        They let :func:`estimation.accuracy.fit_impedance` remove Welch's leakage.
     coherence_Z : ndarray [-], shape (nf, n, n)
         Derived coherence of each Z_ik (docs/estimation.md): ``coherence_T[:, i, k] *
         coherence_P[:, k, k]``, the coherence the direct estimate from theta_k to tau_h_i
@@ -74,6 +79,8 @@ class ImpedanceEstimate:
     coherence_P: np.ndarray
     coherence_T: np.ndarray
     coherence_Z: np.ndarray
+    P1: np.ndarray
+    P2: np.ndarray
     method: str
     fs: float
     band_hz: tuple = BAND_HZ
@@ -141,9 +148,9 @@ def estimate_impedance(trials, *, method="decomposition", band_hz=BAND_HZ,
                            detrend=detrend)
     fs, n = _common_rate_and_size(trials)
     if method in ("decomposition", "full"):
-        f, P, T, cP, cT, nseg = _decomposed_responses(trials, n, fs, options)
+        f, P, T, cP, cT, P1, P2, nseg = _decomposed_responses(trials, n, fs, options)
     else:
-        f, P, T, cP, cT, nseg = _mimo_responses(trials, n, fs, options, method)
+        f, P, T, cP, cT, P1, P2, nseg = _mimo_responses(trials, n, fs, options, method)
     if method == "decomposition":
         Z = T / np.diagonal(P, axis1=1, axis2=2)[:, None, :]
     elif method == "direct":
@@ -153,7 +160,7 @@ def estimate_impedance(trials, *, method="decomposition", band_hz=BAND_HZ,
         Z = np.linalg.solve(np.swapaxes(P, 1, 2), np.swapaxes(T, 1, 2)).swapaxes(1, 2)
     cZ = cT * np.diagonal(cP, axis1=1, axis2=2)[:, None, :]
     return ImpedanceEstimate(f=f, Z=Z, P=P, T=T, coherence_P=cP, coherence_T=cT,
-                             coherence_Z=cZ, method=method, fs=fs, band_hz=tuple(band_hz),
+                             coherence_Z=cZ, P1=P1, P2=P2, method=method, fs=fs, band_hz=tuple(band_hz),
                              n_segments=nseg, trials=[t.name for t in trials])
 
 
@@ -166,10 +173,11 @@ def _common_rate_and_size(trials) -> tuple[float, int]:
     return fs, n
 
 
-def _pooled(trials, fs, options, x_of, y_of):
+def _pooled(trials, fs, options, x_of, y_of, leak_of=None):
     """Welch spectra of x and y pooled over trials, weighted by their segment counts.
 
-    Returns ``(f, Gxx (nf, p, p), Gxy (nf, p, q), Gyy_diag (nf, q), n_segments)``.
+    Returns ``(f, Gxx (nf, p, p), Gxy (nf, p, q), Gyy_diag (nf, q), G1, G2, n_segments)``,
+    G1 and G2 the window-derivative cross-spectra of x with ``leak_of(trial)`` (or None).
     """
     total, acc = 0, None
     for trial in trials:
@@ -180,10 +188,20 @@ def _pooled(trials, fs, options, x_of, y_of):
         _, gyy = spectral.auto_spectrum(y, **kw)
         w = options.n_segments(x.shape[0])
         parts = [w * gxx, w * gxy, w * gyy]
+        if leak_of is not None:
+            if options.window != "hann" or options.detrend != "constant":
+                raise EstimationError("the window-leakage spectra need window='hann' and "
+                                      f"detrend='constant', got {options.window!r}, "
+                                      f"{options.detrend!r}")
+            _, _, g1, g2 = spectral.window_derivative_spectra(
+                x, leak_of(trial), fs=fs, nperseg=options.nperseg,
+                noverlap=options.noverlap, nfft=options.nfft)
+            parts += [w * g1, w * g2]
         acc = parts if acc is None else [a + p for a, p in zip(acc, parts)]
         total += w
-    gxx, gxy, gyy = (a / total for a in acc)
-    return f, gxx, gxy, gyy, total
+    acc = [a / total for a in acc]
+    g1, g2 = acc[3:] if leak_of is not None else (None, None)
+    return (f, *acc[:3], g1, g2, total)
 
 
 def _decomposed_responses(trials, n, fs, options):
@@ -197,23 +215,24 @@ def _decomposed_responses(trials, n, fs, options):
         raise EstimationError(f"no trial perturbs joint(s) {missing}: the decomposition "
                               f"needs one trial per joint 1..{n}, got "
                               f"{[t.name for t in trials]}")
-    P = T = cP = cT = None
+    P = T = cP = cT = P1 = P2 = None
     segments = []
     for k, group in by_joint.items():
-        f, gdd, gdy, gyy, nseg = _pooled(
+        f, gdd, gdy, gyy, g1, g2, nseg = _pooled(
             group, fs, options, lambda t, k=k: t.tau_delta[:, k - 1:k],
-            lambda t: np.hstack([t.theta, t.tau_h]))
+            lambda t: np.hstack([t.theta, t.tau_h]), lambda t: t.theta)
         if P is None:
             shape = (f.size, n, n)
-            P, T = np.empty(shape, complex), np.empty(shape, complex)
+            P, T, P1, P2 = (np.empty(shape, complex) for _ in range(4))
             cP, cT = np.empty(shape), np.empty(shape)
         gdd, gdy = gdd[:, 0, 0].real, gdy[:, 0, :]
         H = gdy / gdd[:, None]
+        P1[:, :, k - 1], P2[:, :, k - 1] = g1[:, 0, :] / gdd[:, None], g2[:, 0, :] / gdd[:, None]
         C = spectral.ordinary_coherence(gdy, gdd[:, None], gyy)
         P[:, :, k - 1], T[:, :, k - 1] = H[:, :n], H[:, n:]
         cP[:, :, k - 1], cT[:, :, k - 1] = C[:, :n], C[:, n:]
         segments.append(nseg)
-    return f, P, T, cP, cT, min(segments)
+    return f, P, T, cP, cT, P1, P2, min(segments)
 
 
 def _mimo_responses(trials, n, fs, options, method):
@@ -221,21 +240,24 @@ def _mimo_responses(trials, n, fs, options, method):
     if single:
         raise EstimationError(f"method {method!r} needs trials with every joint perturbed at "
                               f"once (perturbed_dof=null); trial(s) {single} perturb one joint")
-    f, gdd, gdy, gyy, nseg = _pooled(trials, fs, options, lambda t: t.tau_delta,
-                                     lambda t: np.hstack([t.theta, t.tau_h]))
+    f, gdd, gdy, gyy, g1, g2, nseg = _pooled(trials, fs, options, lambda t: t.tau_delta,
+                                             lambda t: np.hstack([t.theta, t.tau_h]),
+                                             lambda t: t.theta)
     H = np.swapaxes(np.linalg.solve(gdd, gdy), 1, 2)  # (nf, 2n, n): Y = H D
+    P1 = np.swapaxes(np.linalg.solve(gdd, g1), 1, 2)
+    P2 = np.swapaxes(np.linalg.solve(gdd, g2), 1, 2)
     cmult = _multiple_coherence(gdd, gdy, gyy)         # (nf, 2n)
     P, T = H[:, :n, :], H[:, n:, :]
     cP = np.repeat(cmult[:, :n, None], n, axis=2)
     cT = np.repeat(cmult[:, n:, None], n, axis=2)
     if method == "direct":
-        f, gtt, gty, gyy2, _ = _pooled(trials, fs, options, lambda t: t.theta,
-                                       lambda t: t.tau_h)
+        f, gtt, gty, gyy2, *_ = _pooled(trials, fs, options, lambda t: t.theta,
+                                        lambda t: t.tau_h)
         T = np.swapaxes(np.linalg.solve(gtt, gty), 1, 2)  # theta -> tau_h, (nf, n, n)
         cT = np.repeat(_multiple_coherence(gtt, gty, gyy2)[:, :, None], n, axis=2)
         cP = np.broadcast_to(np.eye(n), cT.shape).copy()  # theta is the input: no P path
-        P = np.full_like(T, np.nan)
-    return f, P, T, cP, cT, nseg
+        P = P1 = P2 = np.full_like(T, np.nan)
+    return f, P, T, cP, cT, P1, P2, nseg
 
 
 def _multiple_coherence(gxx, gxy, gyy):

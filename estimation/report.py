@@ -39,7 +39,7 @@ from .io import read_trials  # noqa: E402
 ELEMENTS = ("11", "12", "21", "22")
 
 
-def make_report(folder, out, *, truth="table1", fig2_method="decomposition",
+def make_report(folder, out, *, truth="table1", variant="decomposition",
                 progress=True) -> dict:
     """Score every condition of ``folder`` and write figures and tables to ``out``.
 
@@ -52,8 +52,9 @@ def make_report(folder, out, *, truth="table1", fig2_method="decomposition",
     truth : {"table1", "none"}
         Compare with Table I (simulated trials), or, for lab data, with each estimate's
         own second-order fit.
-    fig2_method : str
-        Estimator shown in Fig. 2.
+    variant : str
+        Variant (estimation.conditions.VARIANTS) shown in Figs. 2-4; Fig. 2 plots the raw
+        estimate of its method.
 
     Returns
     -------
@@ -75,10 +76,12 @@ def make_report(folder, out, *, truth="table1", fig2_method="decomposition",
     files = [_write_rows(out / "table_conditions.csv", rows),
              _atomic_text(out / "table_conditions.md", conditions_markdown(rows, arm)),
              *parameter_tables(rows, arm, out)]
-    files.append(_save(fig2(groups, arm, fig2_method), out / "fig2_impedance.png"))
-    files.append(_save(fig3(rows, fig2_method), out / "fig3_accuracy.png"))
-    files.append(_save(fig4(rows, fig2_method), out / "fig4_coherence.png"))
-    summary = {"folder": Path(folder).name, "truth": truth, "n_trials": len(trials),
+    method = next(m for name, m, *_ in VARIANTS if name == variant)
+    files.append(_save(fig2(groups, arm, method), out / "fig2_impedance.png"))
+    files.append(_save(fig3(rows, variant), out / "fig3_accuracy.png"))
+    files.append(_save(fig4(rows, variant), out / "fig4_coherence.png"))
+    summary = {"folder": Path(folder).name, "truth": truth, "variant_in_figures": variant,
+               "n_trials": len(trials),
                "n_conditions": len(groups), "rows": rows}
     files.append(_atomic_text(out / "report.json", json.dumps(summary, indent=1)))
     return {"rows": rows, "files": [str(f) for f in files]}
