@@ -63,7 +63,7 @@ def read_trial_mat(path, *, min_samples=tf.MIN_SAMPLES) -> tf.Trial:
     path = Path(path)
     try:
         data = sio.loadmat(path, simplify_cells=True)
-    except (ValueError, OSError, NotImplementedError) as exc:
+    except (ValueError, OSError, NotImplementedError, sio.matlab.MatReadError) as exc:
         raise MatFileError(f"{path}: not a readable MATLAB file (v4-v7): {exc}") from None
     meta = _metadata(path, data)
     filled = complete_metadata(meta, path)

@@ -1,0 +1,61 @@
+"""Grouping by metadata, the report files and the CLI, on short synthetic trials."""
+
+import csv
+import json
+
+import pytest
+
+import trialformat as tf
+from estimation import condition_of, group_conditions
+from estimation.cli import main
+from estimation.report import make_report
+from estimation.synthetic import synthetic_trial
+
+
+@pytest.fixture(scope="module")
+def grid_folder(tmp_path_factory):
+    """Two conditions; the names lie about friction so only metadata can group them."""
+    folder = tmp_path_factory.mktemp("grid")
+    for fric in (0, 3):
+        for k in (1, 2, None):
+            trial = synthetic_trial(perturbed_dof=k, seed=k or 9, duration_s=12.0)
+            trial.meta["friction"] = tf.reference.friction_level(fric)
+            tf.write_trial(folder / f"fric{3 - fric}_res0_pert3_dof{k}", trial)
+    return folder
+
+
+def test_condition_from_metadata_not_names(grid_folder):
+    trials = tf.read_trials(grid_folder)
+    groups = group_conditions(trials)
+    assert [(c.friction, c.resolution, c.perturbation, c.tuning) for c in groups] == \
+        [(0, 0, 3, "reference"), (3, 0, 3, "reference")]
+    assert all(len(g) == 3 for g in groups.values())
+    trial = trials[0]
+    trial.meta["friction"] = dict(trial.meta["friction"], Fc=[0.33, 0.33])
+    assert condition_of(trial).friction == "custom"
+
+
+def test_report_files_and_tables(grid_folder, tmp_path):
+    result = make_report(grid_folder, tmp_path, progress=False)
+    names = {p.split("/")[-1] for p in result["files"]}
+    assert {"fig2_impedance.png", "fig3_accuracy.png", "fig4_coherence.png",
+            "table_conditions.csv", "table_conditions.md", "table_parameters.csv",
+            "table_parameters.md", "report.json"} <= names
+    rows = list(csv.DictReader(open(tmp_path / "table_conditions.csv")))
+    variants = {r["variant"] for r in rows}
+    assert {"decomposition", "full_corrected", "closed_loop_corrected", "direct"} <= variants
+    assert len(rows) == 2 * 9
+    # These smooth-input trials have no left-limit sampling to compensate: leakage only.
+    best = [r for r in rows if r["variant"] == "full"]
+    assert all(float(r["vaf_min"]) > 99.9 for r in best), [r["vaf_min"] for r in best]
+    assert "| friction |" in (tmp_path / "table_conditions.md").read_text()
+
+
+def test_cli_estimate_writes_json(grid_folder, tmp_path, capsys):
+    out = tmp_path / "est.json"
+    assert main(["estimate", str(grid_folder), "--method", "full", "--truth", "table1",
+                 "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "F0R0P3" in text and "Z22" in text
+    results = json.loads(out.read_text())
+    assert len(results) == 2 and results[0]["leakage_removed"] is True
