@@ -39,7 +39,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("figures", help="paper figures and tables from a grid run",
                               description="Figs. 2-4 and tables of every condition of a "
                                           "folder of trials.")
-    p.add_argument("folder", type=Path)
+    p.add_argument("folders", type=Path, nargs="+",
+                   help="folders of trials (e.g. a grid run and its all-joints trials)")
     p.add_argument("--out", type=Path, required=True, help="report folder")
     p.add_argument("--truth", choices=("none", "table1"), default="table1")
     p.add_argument("--fig-variant", default="decomposition",
@@ -86,7 +87,7 @@ def _describe(cond, row, has_truth) -> str:
 
 
 def run_figures(args) -> int:
-    result = make_report(args.folder, args.out, truth=args.truth, variant=args.fig_variant)
+    result = make_report(args.folders, args.out, truth=args.truth, variant=args.fig_variant)
     for f in result["files"]:
         print(f)
     return 0

@@ -39,14 +39,15 @@ from .io import read_trials  # noqa: E402
 ELEMENTS = ("11", "12", "21", "22")
 
 
-def make_report(folder, out, *, truth="table1", variant="decomposition",
+def make_report(folders, out, *, truth="table1", variant="decomposition",
                 progress=True) -> dict:
-    """Score every condition of ``folder`` and write figures and tables to ``out``.
+    """Score every condition of the trials in ``folders`` and write figures and tables.
 
     Parameters
     ----------
-    folder : path
-        Trials (``.csv``+``.json`` or ``.mat``), e.g. a grid run.
+    folders : path or list of paths
+        Trials (``.csv``+``.json`` or ``.mat``), e.g. a grid run and a folder of
+        all-joints trials for the MIMO baselines; grouped by metadata, not by folder.
     out : path
         Report folder (created).
     truth : {"table1", "none"}
@@ -63,7 +64,9 @@ def make_report(folder, out, *, truth="table1", variant="decomposition",
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     arm = ref.arm_matrices() if truth == "table1" else None
-    paths = sorted(Path(folder).glob("*.csv")) + sorted(Path(folder).glob("*.mat"))
+    folders = [folders] if isinstance(folders, (str, os.PathLike)) else list(folders)
+    paths = [p for folder in folders for p in
+             sorted(Path(folder).glob("*.csv")) + sorted(Path(folder).glob("*.mat"))]
     trials = [t for p in tqdm(paths, desc="reading trials", disable=not progress)
               for t in read_trials([p])]
     groups = group_conditions(trials)
@@ -80,7 +83,7 @@ def make_report(folder, out, *, truth="table1", variant="decomposition",
     files.append(_save(fig2(groups, arm, method), out / "fig2_impedance.png"))
     files.append(_save(fig3(rows, variant), out / "fig3_accuracy.png"))
     files.append(_save(fig4(rows, variant), out / "fig4_coherence.png"))
-    summary = {"folder": Path(folder).name, "truth": truth, "variant_in_figures": variant,
+    summary = {"folders": [Path(f).name for f in folders], "truth": truth, "variant_in_figures": variant,
                "n_trials": len(trials),
                "n_conditions": len(groups), "rows": rows}
     files.append(_atomic_text(out / "report.json", json.dumps(summary, indent=1)))
