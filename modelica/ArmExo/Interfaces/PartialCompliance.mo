@@ -1,0 +1,10 @@
+within ArmExo.Interfaces;
+partial model PartialCompliance "Torque between two sides a and b of n joints, from their relative motion"
+  extends ArmExo.Icons.Block;
+  parameter Integer n = 2 "Number of joints";
+  input ArmExo.Units.Angle phi_a[n] "Angle of side a";
+  input ArmExo.Units.AngularVelocity w_a[n] "Velocity of side a";
+  input ArmExo.Units.Angle phi_b[n] "Angle of side b";
+  input ArmExo.Units.AngularVelocity w_b[n] "Velocity of side b";
+  output ArmExo.Units.Torque tau[n] "Torque from side a to side b";
+end PartialCompliance;

@@ -1,0 +1,7 @@
+within ArmExo.Interfaces;
+partial model PartialVectorBlock "n inputs u, n outputs y"
+  extends ArmExo.Icons.Block;
+  parameter Integer n = 2 "Number of joints";
+  input Real u[n] "Input signal";
+  output Real y[n] "Output signal";
+end PartialVectorBlock;
