@@ -1,0 +1,567 @@
+"""The diagnosis: where the sim-to-real gap lies, which effect causes it, how far it shrinks.
+
+Flow of :func:`diagnose` (docs/diagnosis.md):
+
+1. read the measured trials blind (inputs.py), estimate the arm (arm.py);
+2. simulate every trial with the nominal model; the gap of every feature, broken down
+   by signal, joint, band, kind and perturbation level, says *where*;
+3. split the trials into calibration and held-out units (:func:`split_units`);
+4. fit every catalogue effect alone on the calibration units, rank by calibration gap;
+   pairs of the top-ranked when no single effect closes the gap;
+5. evaluate each fitted model on the held-out units: the gap reduction there is the
+   headline *how far* per effect;
+6. a verdict: the effect(s), "no significant gap" or "unexplained".
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from itertools import combinations
+
+import numpy as np
+from scipy import optimize
+from scipy import signal as sps
+from tqdm.auto import tqdm
+
+from . import catalogue as cat
+from .arm import ArmModel, estimate_arm
+from .errors import DiagnosisInputError
+from .features import FeatureConfig, grid_step, trial_features
+from .gap import GapResult, make_normaliser, set_gap
+from .inputs import load_trials
+from .simulate import nominal_setup, simulate_like
+
+VERDICT_EFFECT = "effect"
+VERDICT_NONE = "no significant gap"
+VERDICT_UNEXPLAINED = "unexplained"
+
+
+@dataclass(frozen=True)
+class DiagnosisConfig:
+    """Options of a diagnosis (defaults documented in docs/diagnosis.md).
+
+    Attributes
+    ----------
+    features : FeatureConfig
+    calibration_s : float [s]
+        Length of the calibration segment simulated per calibration trial.
+    held_out_s : float [s]
+        Longest held-out segment simulated per held-out trial.
+    time_split_fraction : float
+        When a joint has one trial only: the first fraction is calibration, the rest
+        held out.
+    calibration_trials_per_joint : int
+    significance_gap : float
+        Nominal gap (all trials) above which a gap is significant; calibrated on
+        nominal-vs-nominal sets (docs/diagnosis.md).
+    explained_fraction : float
+        Held-out gap reduction an effect needs to be named.
+    pair_gain : float
+        A pair is preferred to the best single effect when its calibration gap is below
+        this fraction of the single's.
+    n_top_for_pairs : int
+    grid_points, refine_iterations : int
+        Bounded 1-D search: coarse (log-)grid, then Brent refinement in the best bracket.
+    effects : tuple of str
+        Catalogue effects tried.
+    """
+
+    features: FeatureConfig = FeatureConfig()
+    calibration_s: float = 12.0
+    held_out_s: float = 16.0
+    time_split_fraction: float = 0.6
+    calibration_trials_per_joint: int = 1
+    significance_gap: float = 1.0
+    explained_fraction: float = 0.5
+    pair_gain: float = 0.5
+    n_top_for_pairs: int = 3
+    grid_points: int = 5
+    refine_iterations: int = 6
+    effects: tuple = tuple(cat.CATALOGUE)
+
+
+@dataclass
+class Unit:
+    """A stretch of one measured trial: simulate samples [0, stop), compare [start, stop)."""
+
+    trial: object
+    start: int
+    stop: int
+    role: str
+
+    @property
+    def key(self) -> str:
+        return f"{self.trial.name}[{self.start}:{self.stop}]"
+
+    @property
+    def level(self):
+        return (self.trial.meta.get("perturbation") or {}).get("level")
+
+
+def split_units(trials, cfg: DiagnosisConfig) -> tuple[list, list, str]:
+    """Calibration and held-out units, and the rule applied (docs/diagnosis.md).
+
+    Trials are grouped by perturbed joint and sorted by (level, seed, name). A group of
+    two or more alternates: even positions calibrate (at most
+    ``calibration_trials_per_joint``, first ``calibration_s``), odd positions are held
+    out (first ``held_out_s``). A group of one trial is split in time at
+    ``time_split_fraction``: the fit sees the first part, the held-out part is the rest
+    of the same run (simulated from t = 0 so that its initial state is right).
+    """
+    nperseg = cfg.features.nperseg
+    fs = trials[0].fs
+    groups: dict = {}
+    for t in trials:
+        groups.setdefault(t.perturbed_dof, []).append(t)
+    cal, held, rules = [], [], set()
+    for k in sorted(groups, key=lambda v: -1 if v is None else v):
+        group = sorted(groups[k], key=lambda t: (
+            (t.meta.get("perturbation") or {}).get("level") or 0,
+            (t.meta.get("perturbation") or {}).get("seed") or 0, t.name))
+        if len(group) == 1:
+            t = group[0]
+            cut = int(round(cfg.time_split_fraction * t.n_samples))
+            short = min(cut, t.n_samples - cut)
+            if short < 3 * nperseg:
+                raise DiagnosisInputError(
+                    f"trial {t.name!r}: {t.n_samples} samples; a lone trial of its joint is "
+                    f"split in time and each part needs at least {3 * nperseg} samples "
+                    f"(3 spectral segments of {nperseg}), i.e. the trial at least "
+                    f"{math.ceil(3 * nperseg / min(cfg.time_split_fraction, 1 - cfg.time_split_fraction))} samples")
+            cal.append(Unit(t, 0, cut, "calibration"))
+            held.append(Unit(t, cut, t.n_samples, "held_out"))
+            rules.add("time")
+            continue
+        rules.add("trials")
+        for pos, t in enumerate(group):
+            if pos % 2 == 0 and pos // 2 < cfg.calibration_trials_per_joint:
+                stop = min(t.n_samples, int(round(cfg.calibration_s * fs)))
+                cal.append(Unit(t, 0, max(stop, min(t.n_samples, 4 * nperseg)), "calibration"))
+            elif pos % 2 == 1:
+                stop = min(t.n_samples, int(round(cfg.held_out_s * fs)))
+                held.append(Unit(t, 0, max(stop, min(t.n_samples, 4 * nperseg)), "held_out"))
+    rule = " + ".join(sorted(rules))
+    return cal, held, rule
+
+
+def _effects_key(effects: dict) -> str:
+    return json.dumps(effects, sort_keys=True)
+
+
+class Evaluator:
+    """Simulates units with candidate models and computes their gap; caches every run.
+
+    The normalisation of each unit is fixed from the nominal model (gap.py).
+    """
+
+    def __init__(self, setup, units, cfg: DiagnosisConfig, plant=None,
+                 cache: dict | None = None):
+        self.setup, self.units, self.cfg, self.plant = setup, units, cfg, plant
+        self.n_dof = units[0].trial.n_dof
+        self._sims: dict = {} if cache is None else cache
+        self.n_simulations = 0
+        self.measured = {u.key: trial_features(u.trial, cfg.features, start=u.start,
+                                               stop=u.stop) for u in units}
+        nominal = {u.key: self.features(u, {}) for u in units}
+        if any(v is None for v in nominal.values()):
+            bad = [k for k, v in nominal.items() if v is None]
+            raise DiagnosisInputError(f"the nominal model diverges on {bad}: the declared "
+                                      f"set-up cannot reproduce these trials")
+        self.norms = {u.key: make_normaliser(self.measured[u.key], nominal[u.key],
+                                             cfg.features) for u in units}
+
+    def simulation(self, unit: Unit, effects: dict):
+        """The model's run of the unit's experiment, at least ``unit.stop`` samples long.
+
+        Runs are causal, so one run serves every unit that is a prefix of it; the cache
+        keeps the longest run per (trial, model) and may be shared between evaluators.
+        """
+        key = (unit.trial.name, _effects_key(effects))
+        have = self._sims.get(key)
+        # a model that diverged once is not run again (it is unstable)
+        if have is None or (have[1] is not None and have[0] < unit.stop):
+            sim = simulate_like(unit.trial, self.setup, effects, unit.stop, plant=self.plant)
+            self._sims[key] = (unit.stop, sim)
+            self.n_simulations += 1
+        return self._sims[key][1]
+
+    def features(self, unit: Unit, effects: dict):
+        sim = self.simulation(unit, effects)
+        if sim is None:
+            return None
+        return trial_features(sim, self.cfg.features, start=unit.start, stop=unit.stop)
+
+    def gap(self, effects: dict) -> GapResult | None:
+        """Gap of the model ``nominal + effects`` over the units (None: it diverged)."""
+        pairs = []
+        for u in self.units:
+            f = self.features(u, effects)
+            if f is None:
+                return None
+            pairs.append((u.trial.name, u.level, self.measured[u.key], f, self.norms[u.key]))
+        return set_gap(pairs)
+
+    def gap_value(self, effects: dict) -> float:
+        result = self.gap(effects)
+        return math.inf if result is None else result.value
+
+    def objective(self, effects: dict) -> float:
+        """Unclipped excess gap (GapResult.excess), inf when the model diverges."""
+        result = self.gap(effects)
+        return math.inf if result is None else result.excess
+
+
+# ----------------------------------------------------------------------------- fitting
+
+
+def _merge(*dicts) -> dict:
+    out = {}
+    for d in dicts:
+        out.update(d)
+    return out
+
+
+@dataclass
+class EffectFit:
+    """Fitted parameters of one effect (or pair) on the calibration units."""
+
+    effects: tuple
+    params: dict            # effect -> primary params
+    calibration_gap: float
+    n_evaluations: int
+    held_out_gap: float = math.nan
+    objective: float = math.nan
+
+    def simulation_effects(self, n_dof) -> dict:
+        return {e: cat.expand_effect(e, self.params[e], n_dof) for e in self.effects}
+
+
+def fit_effect(name: str, ev: Evaluator, base: dict | None = None,
+               around: dict | None = None) -> tuple[dict, float, int]:
+    """Fit effect ``name`` (added to the ``base`` effects) on the calibration units.
+
+    Returns ``(primary params, calibration gap, simulations run, calibration excess)``. ``around`` narrows a
+    scalar search to a factor 3 about a previous estimate (used for pairs).
+    """
+    effect = cat.get_effect(name)
+    base = base or {}
+    n0 = ev.n_simulations
+    full = lambda p: _merge(base, {name: effect.expand(p, ev.n_dof)})  # noqa: E731
+    if effect.fit == "grid":
+        params = _grid_estimate(ev)
+    elif effect.fit == "noise":
+        params = _noise_estimate(ev, base)
+    elif effect.fit == "integer":
+        p = effect.parameters[0]
+        values = range(int(p.bounds[0]), int(p.bounds[1]) + 1)
+        gaps = {v: ev.objective(full({p.name: v})) for v in values}
+        params = {p.name: min(gaps, key=gaps.get)}
+    else:
+        params = _scalar_search(effect, ev, full, around)
+    return params, ev.gap_value(full(params)), ev.n_simulations - n0, ev.objective(full(params))
+
+
+def _scalar_search(effect, ev, full, around):
+    p = effect.parameters[0]
+    cfg = ev.cfg
+    to_x = (lambda v: math.log(v)) if p.log else (lambda v: v)
+    from_x = (lambda x: math.exp(x)) if p.log else (lambda x: x)
+    lo, hi = to_x(p.bounds[0]), to_x(p.bounds[1])
+    if around is not None:
+        c = to_x(around[p.name])
+        half = math.log(3.0) if p.log else 0.25 * (hi - lo)
+        lo, hi = max(lo, c - half), min(hi, c + half)
+    cache: dict = {}
+
+    def objective(x):
+        x = float(np.clip(x, lo, hi))
+        if x not in cache:
+            cache[x] = ev.objective(full({p.name: from_x(x)}))
+        return cache[x]
+
+    grid = np.linspace(lo, hi, cfg.grid_points)
+    values = [objective(x) for x in grid]
+    i = int(np.argmin(values))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    if np.isfinite(values[i]) and cfg.refine_iterations > 0:
+        optimize.minimize_scalar(objective, bounds=(a, b), method="bounded",
+                                 options={"maxiter": cfg.refine_iterations,
+                                          "xatol": 0.01 * (b - a)})
+    best = min(cache, key=cache.get)
+    return {p.name: float(from_x(best))}
+
+
+def _grid_estimate(ev: Evaluator) -> dict:
+    """Quantisation steps read from the grid the measured samples sit on."""
+    enc, tor = [], []
+    for u in ev.units:
+        t = u.trial
+        for j in range(t.n_dof):
+            enc.append(grid_step(t.theta[u.start:u.stop, j]))
+            tor.append(grid_step(t.tau_h[u.start:u.stop, j]))
+    enc_deg = float(np.degrees(np.median(enc)))
+    return {"encoder_resolution_deg": enc_deg, "torque_resolution_nm": float(np.median(tor))}
+
+
+NOISE_PROBE = {"theta_noise_std_rad": 2e-5, "tau_noise_std_nm": 0.01}
+NOISE_SIGNALS = ("theta", "tau_h")
+
+
+def _band_powers(trial, start, stop, cfg: FeatureConfig) -> np.ndarray:
+    """Mean PSD of theta and tau_h, per joint, in the noise bands above 60 Hz."""
+    out = []
+    for s in NOISE_SIGNALS:
+        f, p = sps.welch(trial.signal(s)[start:stop], fs=trial.fs, nperseg=cfg.nperseg,
+                         noverlap=cfg.noverlap, axis=0)
+        for band in cfg.noise_bands:
+            if band[0] >= 60.0:
+                out.append(p[(f >= band[0]) & (f <= band[1])].mean(axis=0))
+    return np.concatenate(out)
+
+
+def _noise_estimate(ev: Evaluator, base: dict) -> dict:
+    """Sensor noise read from the high-frequency power of theta and tau_h.
+
+    In a linear closed loop each band power is P0 + a sigma_theta^2 + b sigma_tau^2: two
+    probe simulations (one noise source each, at NOISE_PROBE) give a and b, and the
+    variances follow by non-negative least squares on the measured powers (relative
+    errors), pooled over the calibration units.
+    """
+    n = ev.n_dof
+    rows, rhs = [], []
+    probes = [{"theta_noise_std_rad": NOISE_PROBE["theta_noise_std_rad"], "tau_noise_std_nm": 0.0},
+              {"theta_noise_std_rad": 0.0, "tau_noise_std_nm": NOISE_PROBE["tau_noise_std_nm"]}]
+    for u in ev.units:
+        sims = [ev.simulation(u, base)] + [
+            ev.simulation(u, _merge(base, {"sensor_noise": cat.expand_effect(
+                "sensor_noise", p, n)})) for p in probes]
+        if any(s is None for s in sims):
+            continue
+        p0, pa, pb = (_band_powers(s, u.start, u.stop, ev.cfg.features) for s in sims)
+        pm = _band_powers(u.trial, u.start, u.stop, ev.cfg.features)
+        a = (pa - p0) / NOISE_PROBE["theta_noise_std_rad"] ** 2
+        b = (pb - p0) / NOISE_PROBE["tau_noise_std_nm"] ** 2
+        w = 1.0 / np.maximum(pm, np.finfo(float).tiny)
+        rows.append(np.column_stack([a * w, b * w]))
+        rhs.append((pm - p0) * w)
+    if not rows:
+        return {"theta_noise_std_rad": 0.0, "tau_noise_std_nm": 0.0}
+    var, _ = optimize.nnls(np.vstack(rows), np.concatenate(rhs))
+    return {"theta_noise_std_rad": float(math.sqrt(var[0])),
+            "tau_noise_std_nm": float(math.sqrt(var[1]))}
+
+
+# ----------------------------------------------------------------------------- report
+
+
+@dataclass
+class DiagnosisReport:
+    """Result of :func:`diagnose`; ``to_dict()`` is the report's JSON (docs/diagnosis.md)."""
+
+    verdict: str
+    named: list
+    fitted: dict
+    ranking: list
+    pairs: list
+    gap: dict
+    where: dict
+    arm: dict
+    split: dict
+    config: dict
+    n_simulations: int
+    elapsed_s: float
+    trials: list
+    out_dir: object = None
+    extras: dict = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> dict:
+        return {"format": "arm-impedance-diagnosis/1", "verdict": self.verdict,
+                "named_effects": self.named, "fitted_parameters": self.fitted,
+                "ranking": self.ranking, "pairs": self.pairs, "gap": self.gap,
+                "where": self.where, "arm": self.arm, "split": self.split,
+                "trials": self.trials, "n_simulations": self.n_simulations,
+                "elapsed_s": self.elapsed_s, "config": self.config}
+
+
+def where_breakdown(result: GapResult) -> dict:
+    """The gap broken down for the report (keys documented in docs/diagnosis.md)."""
+    def rows(*keys):
+        return [{**dict(zip(keys, k)), "gap": v}
+                for k, v in sorted(result.breakdown(*keys).items(), key=lambda kv: -kv[1])]
+    bands = rows("kind", "signal", "joint", "band")
+    return {"total": result.value, "coherent_share": result.coherent_share(),
+            "by_signal": rows("signal"), "by_joint": rows("joint"), "by_kind": rows("kind"),
+            "by_level": rows("level"), "by_signal_kind": rows("signal", "kind"),
+            "by_band": bands, "top_bands": bands[:5]}
+
+
+def _jsonable(params: dict) -> dict:
+    return {k: (float(v) if not isinstance(v, int) else v) for k, v in params.items()}
+
+
+def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(),
+             plant=None, progress: bool = True) -> DiagnosisReport:
+    """Diagnose the sim-to-real gap of a folder of measured trials.
+
+    Parameters
+    ----------
+    source : path or list of paths
+        Folder of trials (``NAME.csv`` + ``NAME.json``) or a list of ``NAME.csv``.
+        Truth files (``NAME.truth.json``) and ``meta["simulation"]`` are never read.
+    out_dir : path, optional
+        Where to write the report (``report.md``, ``report.json``, PNG plots).
+    config : DiagnosisConfig, keyword-only
+    plant : orchestrator.Plant or path, optional
+        The plant FMU (default: the reference plant).
+    progress : bool
+        Show tqdm progress bars.
+
+    Returns
+    -------
+    DiagnosisReport
+
+    Raises
+    ------
+    DiagnosisInputError
+        No trial, disagreeing declared set-ups, trials too short; the message names the file.
+    """
+    import time
+    t0 = time.perf_counter()
+    trials = load_trials(source)
+    for t in trials:
+        if t.n_samples < 4 * config.features.nperseg:
+            raise DiagnosisInputError(f"trial {t.name!r}: {t.n_samples} samples, fewer than "
+                                      f"4 spectral segments of {config.features.nperseg}")
+    unknown = [e for e in config.effects if e not in cat.CATALOGUE]
+    if unknown:
+        raise DiagnosisInputError(f"config.effects: unknown effect(s) {unknown}")
+    cal, held, rule = split_units(trials, config)
+    arm = estimate_arm(trials)
+    setup = nominal_setup(trials[0].meta, arm)
+    full_units = [Unit(t, 0, t.n_samples, "all") for t in trials]
+    bar = tqdm(total=3 + len(config.effects), desc="diagnosis", disable=not progress,
+               unit="step")
+    bar.set_postfix_str("nominal")
+    cache: dict = {}
+    ev_all = Evaluator(setup, full_units, config, plant, cache)
+    nominal_all = ev_all.gap({})
+    bar.update()
+    ev_cal = Evaluator(setup, cal, config, plant, cache)
+    ev_held = Evaluator(setup, held, config, plant, cache)
+    g0_cal, g0_held = ev_cal.gap_value({}), ev_held.gap_value({})
+    bar.update()
+    singles = []
+    for name in config.effects:
+        bar.set_postfix_str(name)
+        params, gcal, nev, obj = fit_effect(name, ev_cal)
+        fit = EffectFit((name,), {name: _jsonable(params)}, gcal, nev, objective=obj)
+        fit.held_out_gap = ev_held.gap_value(fit.simulation_effects(trials[0].n_dof))
+        singles.append(fit)
+        bar.update()
+    singles.sort(key=lambda f: (f.calibration_gap, f.objective))
+    significant = nominal_all.value > config.significance_gap
+    pairs = []
+    best = singles[0]
+    if significant and _residual_needs_pair(best, g0_cal, config):
+        bar.set_postfix_str("pairs")
+        for a, b in combinations(singles[:config.n_top_for_pairs], 2):
+            pairs.append(_fit_pair(a, b, ev_cal, ev_held, trials[0].n_dof))
+        pairs.sort(key=lambda f: (f.calibration_gap, f.objective))
+    bar.update()
+    bar.close()
+    verdict, named, chosen = _verdict(significant, singles, pairs, g0_held, config)
+    ranking = [_ranking_row(f, g0_cal, g0_held) for f in singles]
+    pair_rows = [_ranking_row(f, g0_cal, g0_held) for f in pairs]
+    after = None
+    if chosen is not None:
+        after = ev_all.gap(chosen.simulation_effects(trials[0].n_dof))
+    report = DiagnosisReport(
+        verdict=verdict, named=named,
+        fitted={} if chosen is None else chosen.params,
+        ranking=ranking, pairs=pair_rows,
+        gap={"nominal_all": nominal_all.value, "nominal_calibration": g0_cal,
+             "nominal_held_out": g0_held, "significance_threshold": config.significance_gap,
+             "significant": bool(significant),
+             "named_held_out": None if chosen is None else chosen.held_out_gap,
+             "named_held_out_reduction": None if chosen is None else
+             _reduction(g0_held, chosen.held_out_gap),
+             "named_all": None if after is None else after.value},
+        where={"nominal": where_breakdown(nominal_all),
+               "named": None if after is None else where_breakdown(after)},
+        arm=arm.to_dict(),
+        split={"rule": rule,
+               "calibration": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
+                               for u in cal],
+               "held_out": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
+                            for u in held]},
+        config=_config_dict(config),
+        n_simulations=ev_all.n_simulations + ev_cal.n_simulations + ev_held.n_simulations,
+        elapsed_s=time.perf_counter() - t0, trials=[t.name for t in trials],
+        extras={"nominal_all": nominal_all, "after_all": after, "ev_all": ev_all,
+                "chosen": chosen, "trials": trials})
+    if out_dir is not None:
+        from .report import write_report
+        write_report(report, out_dir)
+    return report
+
+
+def _config_dict(cfg: DiagnosisConfig) -> dict:
+    out = {k: v for k, v in cfg.__dict__.items() if k != "features"}
+    out["effects"] = list(cfg.effects)
+    out["features"] = cfg.features.to_dict()
+    return out
+
+
+def _reduction(before: float, after: float) -> float:
+    if not np.isfinite(after):
+        return -math.inf
+    if before <= 0:
+        return 0.0
+    return float((before - after) / before)
+
+
+def _ranking_row(fit: EffectFit, g0_cal: float, g0_held: float) -> dict:
+    return {"effects": list(fit.effects), "params": fit.params,
+            "calibration_gap": fit.calibration_gap,
+            "calibration_reduction": _reduction(g0_cal, fit.calibration_gap),
+            "held_out_gap": fit.held_out_gap,
+            "held_out_reduction": _reduction(g0_held, fit.held_out_gap),
+            "n_simulations": fit.n_evaluations}
+
+
+def _residual_needs_pair(best: EffectFit, g0_cal: float, cfg: DiagnosisConfig) -> bool:
+    """A pair is tried when the best single leaves a significant calibration gap that is
+    more than (1 - explained_fraction) of the nominal one... or simply a large one."""
+    return best.calibration_gap > max(cfg.significance_gap,
+                                      (1 - cfg.explained_fraction) * g0_cal * 0.5)
+
+
+def _fit_pair(a: EffectFit, b: EffectFit, ev_cal: Evaluator, ev_held: Evaluator,
+              n_dof: int) -> EffectFit:
+    """Fit a pair by one round of coordinate descent from the single-effect fits."""
+    ea, eb = a.effects[0], b.effects[0]
+    pa, pb = a.params[ea], b.params[eb]
+    n0 = ev_cal.n_simulations
+    pa, _, _, _ = fit_effect(ea, ev_cal, base={eb: cat.expand_effect(eb, pb, n_dof)},
+                             around=pa)
+    pb, gap, _, obj = fit_effect(eb, ev_cal, base={ea: cat.expand_effect(ea, pa, n_dof)},
+                                 around=pb)
+    fit = EffectFit((ea, eb), {ea: _jsonable(pa), eb: _jsonable(pb)}, gap,
+                    ev_cal.n_simulations - n0, objective=obj)
+    fit.held_out_gap = ev_held.gap_value(fit.simulation_effects(n_dof))
+    return fit
+
+
+def _verdict(significant, singles, pairs, g0_held, cfg):
+    """(verdict, named effects, chosen fit) from the ranked fits."""
+    if not significant:
+        return VERDICT_NONE, [], None
+    best = singles[0]
+    chosen = best
+    if pairs and pairs[0].calibration_gap < cfg.pair_gain * best.calibration_gap:
+        chosen = pairs[0]
+    if _reduction(g0_held, chosen.held_out_gap) >= cfg.explained_fraction:
+        return VERDICT_EFFECT, list(chosen.effects), chosen
+    return VERDICT_UNEXPLAINED, [], None

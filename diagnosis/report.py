@@ -1,0 +1,233 @@
+"""The diagnosis report: ``report.md``, ``report.json`` and PNG plots in one folder."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy import signal as sps  # noqa: E402
+
+from .features import SIGNALS  # noqa: E402
+
+FIGURES = {"where": "gap_where.png", "ranking": "gap_ranking.png",
+           "frf": "frf_compare.png", "noise": "noise_spectra.png"}
+UNITS = {"theta": "rad", "tau_h": "N m", "tau_m": "N m"}
+
+
+def write_report(report, out_dir) -> Path:
+    """Write the report folder; returns the path of ``report.md``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    _plot_where(report, out / FIGURES["where"])
+    _plot_ranking(report, out / FIGURES["ranking"])
+    _plot_signals(report, out / FIGURES["frf"], out / FIGURES["noise"])
+    _atomic_text(out / "report.json", json.dumps(_clean(report.to_dict()), indent=2))
+    _atomic_text(out / "report.md", markdown(report))
+    return out / "report.md"
+
+
+def _atomic_text(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        fh.write(text)
+    os.replace(tmp, path)
+
+
+def _clean(obj):
+    """JSON-safe copy: numpy scalars to float, inf/nan to strings."""
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return v if np.isfinite(v) else ("inf" if v > 0 else "-inf" if v < 0 else "nan")
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def _fmt(v, digits=3) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        if not np.isfinite(v):
+            return "diverges" if v > 0 else "-inf"
+        return f"{v:.{digits}g}"
+    return str(v)
+
+
+def _params(p: dict) -> str:
+    return "; ".join(f"{e}: " + ", ".join(f"{k}={_fmt(v, 4)}" for k, v in d.items())
+                     for e, d in p.items())
+
+
+def markdown(report) -> str:
+    """The report page (Markdown)."""
+    g = report.gap
+    lines = [f"# Sim-to-real gap diagnosis", "",
+             f"Trials: {', '.join(report.trials)}", "",
+             f"## Verdict: **{report.verdict}**"
+             + (f" — {' + '.join(report.named)}" if report.named else ""), ""]
+    if report.named:
+        lines += [f"Fitted: {_params(report.fitted)}", "",
+                  f"Held-out gap {_fmt(g['nominal_held_out'])} -> {_fmt(g['named_held_out'])} "
+                  f"(reduction {_fmt(100 * g['named_held_out_reduction'], 3)} %); "
+                  f"all data {_fmt(g['nominal_all'])} -> {_fmt(g['named_all'])}.", ""]
+    lines += [f"Nominal gap, all data: {_fmt(g['nominal_all'])} (significant above "
+              f"{_fmt(g['significance_threshold'])}); calibration {_fmt(g['nominal_calibration'])}, "
+              f"held out {_fmt(g['nominal_held_out'])}.", "",
+              "## Where (nominal model)", "",
+              f"![where]({FIGURES['where']})", ""]
+    w = report.where["nominal"]
+    lines += [f"Coherent (FRF) share of the squared normalised differences: "
+              f"{_fmt(100 * w['coherent_share'])} %.", "",
+              "| group | gap |", "|---|---|"]
+    for key in ("by_signal", "by_joint", "by_kind", "by_level"):
+        for row in w[key]:
+            label = ", ".join(f"{k}={v}" for k, v in row.items() if k != "gap")
+            lines.append(f"| {label} | {_fmt(row['gap'])} |")
+    lines += ["", "Bands where it concentrates:", "", "| kind | signal | joint | band | gap |",
+              "|---|---|---|---|---|"]
+    for row in w["top_bands"]:
+        lines.append(f"| {row['kind']} | {row['signal']} | {row['joint']} | {row['band']} | "
+                     f"{_fmt(row['gap'])} |")
+    lines += ["", "## Which effect (each alone, fitted on the calibration data)", "",
+              f"![ranking]({FIGURES['ranking']})", "",
+              "| rank | effect | fitted | calibration gap | held-out gap | held-out reduction | runs |",
+              "|---|---|---|---|---|---|---|"]
+    for i, r in enumerate(report.ranking, 1):
+        lines.append(f"| {i} | {' + '.join(r['effects'])} | {_params(r['params'])} | "
+                     f"{_fmt(r['calibration_gap'])} | {_fmt(r['held_out_gap'])} | "
+                     f"{_fmt(100 * r['held_out_reduction'])} % | {r['n_simulations']} |")
+    if report.pairs:
+        lines += ["", "Pairs of the top-ranked effects:", "",
+                  "| effects | fitted | calibration gap | held-out gap | held-out reduction |",
+                  "|---|---|---|---|---|"]
+        for r in report.pairs:
+            lines.append(f"| {' + '.join(r['effects'])} | {_params(r['params'])} | "
+                         f"{_fmt(r['calibration_gap'])} | {_fmt(r['held_out_gap'])} | "
+                         f"{_fmt(100 * r['held_out_reduction'])} % |")
+    lines += ["", "## Signals", "", f"![frf]({FIGURES['frf']})", "",
+              f"![noise]({FIGURES['noise']})", "",
+              "## Nominal model", "",
+              f"Arm estimated from the trials ({report.arm['method']} estimator, second-order "
+              f"fit, weighted R^2 {np.round(report.arm['r2'], 3).tolist()}): "
+              f"M_h={np.round(report.arm['M_h'], 4).tolist()}, "
+              f"B_h={np.round(report.arm['B_h'], 4).tolist()}, "
+              f"K_h={np.round(report.arm['K_h'], 3).tolist()}.", "",
+              f"Split rule: {report.split['rule']}; calibration "
+              + ", ".join(f"{u['trial']}[{u['start']}:{u['stop']}]"
+                          for u in report.split["calibration"])
+              + "; held out " + ", ".join(f"{u['trial']}[{u['start']}:{u['stop']}]"
+                                         for u in report.split["held_out"]) + ".", "",
+              f"{report.n_simulations} simulations, {report.elapsed_s:.1f} s.", ""]
+    return "\n".join(lines)
+
+
+def _plot_where(report, path: Path) -> None:
+    result = report.extras["nominal_all"]
+    after = report.extras.get("after_all")
+    panels = [("nominal model", result)] + ([("with " + " + ".join(report.named), after)]
+                                            if after is not None else [])
+    cols = []
+    for lab in result.labels:
+        c = (lab[2], lab[5])
+        if c not in cols:
+            cols.append(c)
+    rows = sorted({(lab[3], lab[4]) for lab in result.labels},
+                  key=lambda r: (SIGNALS.index(r[0]) if r[0] in SIGNALS else 9, r[1]))
+    fig, axes = plt.subplots(1, len(panels), figsize=(1.0 + 0.75 * len(cols) * len(panels), 4.2),
+                             squeeze=False)
+    vmax = None
+    for ax, (title, res) in zip(axes[0], panels):
+        table = res.breakdown("signal", "joint", "kind", "band")
+        grid = np.full((len(rows), len(cols)), np.nan)
+        for (s, j, k, b), v in table.items():
+            grid[rows.index((s, j)), cols.index((k, b))] = v
+        shown = np.log10(1.0 + grid)
+        vmax = vmax or max(1.0, np.nanmax(shown))
+        im = ax.imshow(shown, cmap="magma_r", vmin=0, vmax=vmax, aspect="auto")
+        ax.set_xticks(range(len(cols)), [f"{k}\n{b}" for k, b in cols], rotation=90,
+                      fontsize=7)
+        ax.set_yticks(range(len(rows)), [f"{s}[{j}]" for s, j in rows])
+        ax.set_title(f"gap by band, {title}", fontsize=9)
+        for (i, j), v in np.ndenumerate(grid):
+            if np.isfinite(v) and v >= 1:
+                ax.text(j, i, f"{v:.0f}", ha="center", va="center", fontsize=6, color="w")
+    fig.colorbar(im, ax=axes[0].tolist(), label="log10(1 + gap)")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+def _plot_ranking(report, path: Path) -> None:
+    rows = report.ranking + report.pairs
+    names = [" + ".join(r["effects"]) for r in rows]
+    held = np.array([r["held_out_gap"] for r in rows], float)
+    cal = np.array([r["calibration_gap"] for r in rows], float)
+    g = report.gap
+    top = max(g["nominal_held_out"], g["nominal_calibration"], 1e-3) * 1.5
+    fig, ax = plt.subplots(figsize=(7, 0.35 * len(rows) + 1.5))
+    y = np.arange(len(rows))
+    ax.barh(y - 0.2, np.minimum(np.nan_to_num(cal, posinf=top), top), 0.4,
+            label="calibration (fit)")
+    ax.barh(y + 0.2, np.minimum(np.nan_to_num(held, posinf=top), top), 0.4,
+            label="held out")
+    ax.axvline(g["nominal_held_out"], color="k", ls="--", label="nominal, held out")
+    ax.axvline(g["significance_threshold"], color="r", ls=":", label="significance")
+    ax.set_yticks(y, names, fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xlabel("gap (0 = explained; bars clipped; diverging models at the edge)")
+    ax.legend(fontsize=7, loc="lower right")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+def _plot_signals(report, frf_path: Path, noise_path: Path) -> None:
+    trials = report.extras["trials"]
+    ev = report.extras["ev_all"]
+    chosen = report.extras.get("chosen")
+    trial = trials[0]
+    k = trial.perturbed_dof or 1
+    from .core import Unit
+    unit = Unit(trial, 0, trial.n_samples, "all")
+    runs = [("measured", trial), ("nominal", ev.simulation(unit, {}))]
+    if chosen is not None:
+        runs.append(("with " + " + ".join(chosen.effects),
+                     ev.simulation(unit, chosen.simulation_effects(trial.n_dof))))
+    nper = ev.cfg.features.nperseg
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6), sharex=True)
+    fig2, axes2 = plt.subplots(1, 3, figsize=(12, 3.5))
+    for col, s in enumerate(SIGNALS):
+        for label, run in runs:
+            if run is None:
+                continue
+            x, y = run.tau_delta[:, k - 1], run.signal(s)[:, k - 1]
+            f, pxy = sps.csd(x, y, fs=run.fs, nperseg=nper)
+            _, pxx = sps.welch(x, fs=run.fs, nperseg=nper)
+            _, pyy = sps.welch(y, fs=run.fs, nperseg=nper)
+            band = (f > 0) & (f <= 40)
+            h = pxy[band] / pxx[band]
+            axes[0, col].loglog(f[band], np.abs(h), label=label)
+            axes[1, col].semilogx(f[band], np.degrees(np.angle(h)), label=label)
+            axes2[col].loglog(f[1:], pyy[1:], label=label, lw=0.8)
+        axes[0, col].set_title(f"tau_delta[{k}] -> {s}[{k}]")
+        axes[1, col].set_xlabel("frequency [Hz]")
+        axes2[col].set_title(f"spectrum of {s}[{k}] [{UNITS[s]}^2/Hz]")
+        axes2[col].set_xlabel("frequency [Hz]")
+    axes[0, 0].set_ylabel("|H|")
+    axes[1, 0].set_ylabel("phase [deg]")
+    axes[0, 0].legend(fontsize=7)
+    axes2[0].legend(fontsize=7)
+    fig.suptitle(f"FRFs of trial {trial.name}")
+    fig.savefig(frf_path, dpi=100, bbox_inches="tight")
+    fig2.savefig(noise_path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    plt.close(fig2)
