@@ -52,6 +52,9 @@ class FeatureConfig:
         Absolute floor added to each incoherent spectrum before the log [unit^2/Hz].
     grid_floor : dict
         Smallest grid step reported per signal [rad or N m].
+    min_coherence : float
+        A coherent feature whose band-mean coherence (measured trial) is below this is
+        given an infinite uncertainty: the Welch variance formula does not hold there.
     velocity_cutoff_hz, omega0 : float
         Low-pass [Hz] used to differentiate theta, and the tanh velocity scale [rad/s].
     """
@@ -71,6 +74,7 @@ class FeatureConfig:
     noise_psd_floor: dict = field(default_factory=lambda: {
         "theta": 1e-14, "tau_h": 2e-9, "tau_m": 2e-9})
     grid_floor: dict = field(default_factory=lambda: {"theta": 1e-8, "tau_h": 1e-6})
+    min_coherence: float = 0.5
     velocity_cutoff_hz: float = 20.0
     omega0: float = 0.05
 
@@ -90,7 +94,7 @@ class FeatureVector:
     values : ndarray, shape (F,)
     var_stat : ndarray, shape (F,)
         Analytic statistical variance of the value (Welch), NaN where the variance comes
-        from time batches instead.
+        from time batches instead, inf where the feature is not reliable.
     batches : ndarray, shape (n_batches, F)
         Per-batch values of the ``static`` features (NaN for the others).
     """
@@ -154,6 +158,8 @@ def _spectral_rows(data, k, n, fs, cfg, tag):
                 sel = (f >= band[0]) & (f <= band[1])
                 m_eff = max(1.0, sel.sum() / 1.5)  # Hann: neighbouring bins correlate
                 var = float(np.mean(var_bin[sel]) / m_eff)
+                if np.mean(coh[sel]) < cfg.min_coherence:
+                    var = np.inf  # Welch's variance formula fails here: feature unused
                 hb = h[sel]
                 logmag = float(np.mean(np.log(np.abs(hb) + 1e-300)))
                 phase = float(np.angle(np.mean(hb / (np.abs(hb) + 1e-300))))

@@ -3,12 +3,14 @@
 For each feature i of features.py, with d_i = (measured - simulated) value,
 
     z_i = d_i / sigma_i,   sigma_i^2 = v_i + floor_i^2,
-    gap = max(0, mean_i(z_i^2) - mean_i(e_i)),   e_i = v_i / sigma_i^2,
+    gap = max(0, mean_i(z_i^2) - mean_i(e_i)),   e_i = 2 v_i / sigma_i^2,
 
 where v_i is the statistical variance of the *measured* feature (Welch variance from its
 coherence and number of segments, or, for the static features, the variance over time
 batches of the measured-minus-nominal difference), floor_i a fixed model tolerance, and
-e_i the value z_i^2 takes on average when the difference is measurement noise alone.
+e_i the value z_i^2 takes on average when the difference is noise alone: the difference
+of two independent realisations (measurement and a model that reproduces its noise), each
+with variance v_i.
 sigma is computed once per measured data set (against the nominal simulation) and then
 kept fixed for every candidate model, so gaps of different effects are comparable, and a
 model cannot lower its gap by adding noise (noise only adds to |d|). A trial compared
@@ -32,7 +34,7 @@ class Normaliser:
     ----------
     sigma : ndarray, shape (F,)
     expected : ndarray, shape (F,)
-        e_i, the mean z_i^2 of measurement noise alone.
+        e_i, the mean z_i^2 of noise alone (two independent realisations).
     """
 
     sigma: np.ndarray
@@ -52,7 +54,9 @@ def make_normaliser(measured: FeatureVector, nominal: FeatureVector,
     floor = np.array([_floor(lab, v, config) for lab, v in zip(measured.labels,
                                                                 measured.values)])
     sigma2 = var + floor ** 2
-    return Normaliser(sigma=np.sqrt(sigma2), expected=var / sigma2)
+    unused = ~np.isfinite(sigma2)
+    expected = np.where(unused, 0.0, 2.0 * var / np.where(unused, 1.0, sigma2))
+    return Normaliser(sigma=np.sqrt(sigma2), expected=expected)
 
 
 def _floor(label, value, cfg: FeatureConfig) -> float:
