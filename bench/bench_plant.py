@@ -15,6 +15,10 @@ Measured side by side, in one run (best of --repeat):
   also shown per RK4 step;
 * ``C one call``: a single fmi2DoStep of 50 s (constant torque): the solver alone.
 
+Wall times are sensitive to other processes on the machine: the load average is printed
+and stored, and CPU times (process for the loops, thread for the single call) are given
+next to them.
+
 Usage: ``python bench/bench_plant.py [--repeat 3] [--json bench/results/plant.json]``.
 """
 from __future__ import annotations
@@ -92,19 +96,20 @@ class Bench:
         s.enterInitializationMode()
         s.exitInitializationMode()
 
-    def run_fmpy(self, level: int, u: np.ndarray) -> tuple[float, np.ndarray]:
+    def run_fmpy(self, level: int, u: np.ndarray) -> tuple[float, float, np.ndarray]:
+        """Returns (wall time, CPU time of the process, last outputs)."""
         self.start(level)
         s, vin, vout = self.slave, list(self.vin), self.vout_list
         ul = u.tolist()
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         for k in range(N):
             s.setReal(vin, ul[k])
             s.doStep(k * TS, TS)
             y = s.getReal(vout)
-        return time.perf_counter() - t0, np.array(y)
+        return time.perf_counter() - t0, time.process_time() - c0, np.array(y)
 
-    def run_raw(self, level: int, u: np.ndarray) -> tuple[float, float, np.ndarray]:
-        """Returns (wall time of the loop, time summed around fmi2DoStep, last outputs)."""
+    def run_raw(self, level: int, u: np.ndarray) -> tuple[float, float, float, np.ndarray]:
+        """Returns (wall time of the loop, its CPU time, time summed around fmi2DoStep, last outputs)."""
         self.start(level)
         s = self.slave
         c, set_real, get_real, do_step = s.component, self.raw_set_real, self.raw_get_real, self.raw_do_step
@@ -113,8 +118,8 @@ class Bench:
         ul = u.tolist()
         clock = time.perf_counter_ns
         in_step = 0
-        t0 = time.perf_counter()
         status = 0
+        c0, t0 = time.process_time(), time.perf_counter()
         for k in range(N):
             uin[0], uin[1] = ul[k]
             status |= set_real(c, vin, 2, uin)
@@ -122,10 +127,10 @@ class Bench:
             status |= do_step(c, k * TS, TS, 1)
             in_step += clock() - a
             status |= get_real(c, vout, 4, yout)
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         if status:
             raise RuntimeError("an fmi2 call failed in the raw loop")
-        return wall, in_step * 1e-9, np.array(yout[:])
+        return wall, cpu, in_step * 1e-9, np.array(yout[:])
 
     def call_overhead(self) -> float:
         """Seconds per timed ctypes call of a trivial fmi2 function (measured like doStep)."""
@@ -141,13 +146,14 @@ class Bench:
             tot += clock() - a
         return tot * 1e-9 / N
 
-    def run_one_call(self, level: int, u: np.ndarray) -> float:
+    def run_one_call(self, level: int, u: np.ndarray) -> tuple[float, float]:
+        """One fmi2DoStep over 50 s: (wall time, CPU time of this thread)."""
         self.start(level)
         s = self.slave
         s.setReal(list(self.vin), list(np.mean(np.abs(u), axis=0)))
-        t0 = time.perf_counter()
+        c0, t0 = time.thread_time(), time.perf_counter()
         s.doStep(0.0, T_END)
-        return time.perf_counter() - t0
+        return time.perf_counter() - t0, time.thread_time() - c0
 
 
 def cpu_model() -> str:
@@ -173,31 +179,35 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=str(ROOT / "bench" / "results" / "plant.json"), help="JSON output path")
     args = ap.parse_args(argv)
 
+    load = os.getloadavg()
     fmu_path = fmus.default_fmu_path()
     b = Bench(fmu_path)
     u = torque()
     res = {}
     ovh = min(b.call_overhead() for _ in range(args.repeat))
     for level in (0, 3):
-        best = {"fmpy": np.inf, "raw": np.inf, "in_step": np.inf, "one_call": np.inf}
+        best = dict.fromkeys(("fmpy", "fmpy_cpu", "raw", "raw_cpu", "in_step", "one_call", "one_call_cpu"), np.inf)
         for _ in range(args.repeat):  # side by side: each mode once per repetition
-            t_fmpy, y1 = b.run_fmpy(level, u)
-            t_raw, t_in, y2 = b.run_raw(level, u)
+            t_fmpy, c_fmpy, y1 = b.run_fmpy(level, u)
+            t_raw, c_raw, t_in, y2 = b.run_raw(level, u)
             assert np.array_equal(y1, y2), "fmpy and raw loops must give identical results"
-            best["fmpy"] = min(best["fmpy"], t_fmpy)
-            best["raw"] = min(best["raw"], t_raw)
-            best["in_step"] = min(best["in_step"], t_in - N * ovh)
-            best["one_call"] = min(best["one_call"], b.run_one_call(level, u))
+            t_one, c_one = b.run_one_call(level, u)
+            for key, val in (("fmpy", t_fmpy), ("fmpy_cpu", c_fmpy), ("raw", t_raw), ("raw_cpu", c_raw),
+                             ("in_step", t_in - N * ovh), ("one_call", t_one), ("one_call_cpu", c_one)):
+                best[key] = min(best[key], val)
         steps = T_END / H
         res[level] = {
             "wall_fmpy_s": best["fmpy"],
+            "cpu_fmpy_s": best["fmpy_cpu"],
             "wall_raw_s": best["raw"],
+            "cpu_raw_s": best["raw_cpu"],
             "inside_doStep_s": best["in_step"],
             "python_overhead_raw_s": best["raw"] - best["in_step"],
             "python_overhead_fmpy_s": best["fmpy"] - best["in_step"],
             "ns_per_rk4_step": best["in_step"] / steps * 1e9,
             "one_call_50s_s": best["one_call"],
-            "ns_per_rk4_step_one_call": best["one_call"] / steps * 1e9,
+            "one_call_50s_cpu_s": best["one_call_cpu"],
+            "ns_per_rk4_step_one_call_cpu": best["one_call_cpu"] / steps * 1e9,
             "target_s": TARGETS[level],
             "meets_target_fmpy": bool(best["fmpy"] < TARGETS[level]),
             "meets_target_raw": bool(best["raw"] < TARGETS[level]),
@@ -207,14 +217,16 @@ def main(argv=None) -> int:
     print(f"ArmExoPlant: {T_END:g} s plant time, RK4 h = {H:g} s ({T_END / H:.0f} steps), "
           f"communication step {TS:g} s ({N} doStep calls); best of {args.repeat}")
     print(f"ctypes call overhead: {ovh * 1e9:.0f} ns per call")
-    hdr = f"{'friction':>8} | {'fmpy loop':>9} | {'raw loop':>8} | {'in doStep':>9} | {'ns/step':>7} | " \
-          f"{'py ovh raw':>10} | {'py ovh fmpy':>11} | {'1 call 50s':>10} | {'target':>6}"
+    print(f"load average before: {load[0]:.2f}, after: {os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs)")
+    hdr = f"{'friction':>8} | {'fmpy loop':>9} | {'raw loop':>8} | {'(cpu)':>6} | {'in doStep':>9} | {'ns/step':>7} | " \
+          f"{'py ovh raw':>10} | {'py ovh fmpy':>11} | {'1 call 50s':>10} | {'(cpu)':>6} | {'target':>6}"
     print(hdr)
     print("-" * len(hdr))
     for level, r in res.items():
-        print(f"{level:>8} | {r['wall_fmpy_s']:8.3f}s | {r['wall_raw_s']:7.3f}s | {r['inside_doStep_s']:8.3f}s | "
-              f"{r['ns_per_rk4_step']:7.1f} | {r['python_overhead_raw_s']:9.3f}s | {r['python_overhead_fmpy_s']:10.3f}s | "
-              f"{r['one_call_50s_s']:9.3f}s | {r['target_s']:5.1f}s")
+        print(f"{level:>8} | {r['wall_fmpy_s']:8.3f}s | {r['wall_raw_s']:7.3f}s | {r['cpu_raw_s']:5.3f}s | "
+              f"{r['inside_doStep_s']:8.3f}s | {r['ns_per_rk4_step']:7.1f} | {r['python_overhead_raw_s']:9.3f}s | "
+              f"{r['python_overhead_fmpy_s']:10.3f}s | {r['one_call_50s_s']:9.3f}s | {r['one_call_50s_cpu_s']:5.3f}s | "
+              f"{r['target_s']:5.1f}s")
     ratios = {
         "level3_over_level0_inside_doStep": res[3]["inside_doStep_s"] / res[0]["inside_doStep_s"],
         "level3_over_level0_wall_raw": res[3]["wall_raw_s"] / res[0]["wall_raw_s"],
@@ -231,6 +243,7 @@ def main(argv=None) -> int:
         "benchmark": "bench/bench_plant.py",
         "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "platform": platform.platform(),
+                    "load_average_before": load[0], "load_average_after": os.getloadavg()[0],
                     "python": platform.python_version(), "fmpy": fmpy.__version__, "compiler": compiler_version(),
                     "cflags": " ".join(CFLAGS)},
         "setup": {"plant_time_s": T_END, "rk4_step_s": H, "communication_step_s": TS, "doStep_calls": N,

@@ -58,6 +58,7 @@ typedef struct {
 
     /* sin/cos of q2 at the start of the current RK4 step */
     double q2_ref, s2_ref, c2_ref;
+    int n_rotated;                  /* steps since the last exact sin/cos */
 } ModelData;
 
 #endif

@@ -67,3 +67,30 @@ def test_sources_rebuild_standalone(unzipdir, tmp_path):
                     str(src / f"{MODEL_NAME}_all.c"), "-lm"], check=True, capture_output=True)
     if shutil.which("nm"):
         assert _dynamic_symbols(so) == FMI2_CS_API
+
+
+def test_default_fmu_path_rebuilds_when_stale(monkeypatch, tmp_path):
+    import os
+
+    from fmus import build
+
+    monkeypatch.setattr(build, "BUILD_DIR", tmp_path)
+    path = build.default_fmu_path()
+    assert path == tmp_path / f"{MODEL_NAME}.fmu" and path.exists()
+    first = path.stat().st_mtime_ns
+    assert build.default_fmu_path().stat().st_mtime_ns == first  # up to date: not rebuilt
+    os.utime(path, (0, 0))                                      # older than every source
+    assert build.default_fmu_path().stat().st_mtime > 0
+    with pytest.raises(FileNotFoundError, match="python -m fmus.build"):
+        monkeypatch.setattr(build, "BUILD_DIR", tmp_path / "none")
+        build.default_fmu_path(build_if_missing=False)
+
+
+def test_build_cli(tmp_path):
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "fmus.build", "--out-dir", str(tmp_path)], capture_output=True,
+                         text=True, cwd=Path(__file__).resolve().parents[2])
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / f"{MODEL_NAME}.fmu").exists()
+    assert "RuntimeWarning" not in out.stderr

@@ -25,3 +25,22 @@ def test_reference_result_csv_is_reproduced(fmu_path):
                       delimiter=",", skiprows=1)
     sim = ref.simulate(fmu_path)
     np.testing.assert_allclose(sim, data, rtol=1e-9, atol=1e-12)
+
+
+def test_reading_outputs_does_not_change_the_trajectory(make_slave):
+    """Outputs are computed on demand; whether and how often they are read changes nothing."""
+    from fmus.variables import VR
+
+    results = []
+    for read_every_step in (True, False):
+        slave, _ = make_slave()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        for k in range(300):
+            slave.setReal([VR["tau_m[1]"], VR["tau_m[2]"]], [np.sin(0.05 * k), 0.5 * np.cos(0.03 * k)])
+            slave.doStep(k * 1e-3, 1e-3)
+            if read_every_step:
+                slave.getReal([VR["tau_h[1]"], VR["theta[2]"]])
+        results.append(slave.getReal([VR[n] for n in ("theta[1]", "theta[2]", "omega[1]", "tau_h[2]")]))
+    assert results[0] == results[1]

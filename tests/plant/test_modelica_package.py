@@ -36,3 +36,24 @@ def test_examples_have_experiment_annotations():
 
 def test_lugre_documentation_cites_canudas_de_wit():
     assert "Canudas de Wit" in (ROOT / "Components" / "LuGreFriction.mo").read_text()
+
+
+def test_omc_export_says_clearly_when_omc_is_missing(monkeypatch):
+    from fmus import export_omc
+
+    monkeypatch.setattr(export_omc.shutil, "which", lambda name: None)
+    with pytest.raises(export_omc.OmcNotFound, match="python -m fmus.build"):
+        export_omc.export_fmu()
+    script = export_omc.mos_script("ArmExo.ArmExoPlant", Path("/x/ArmExo/package.mo"))
+    assert 'buildModelFMU(ArmExo.ArmExoPlant, version = "2.0", fmuType = "cs"' in script
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(__import__("shutil").which("omc") is None, reason="OpenModelica (omc) not installed")
+def test_omc_export_validates(tmp_path):
+    from fmpy.validation import validate_fmu
+
+    from fmus import export_omc
+
+    fmu = export_omc.export_fmu(tmp_path)
+    assert validate_fmu(str(fmu)) == []
