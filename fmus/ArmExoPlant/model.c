@@ -166,8 +166,12 @@ int model_initialize(ModelInstance *comp) {
     /* --- state layout (the fast path needs th, w, z at 0..5) --- */
     d->i_th = n; n += 2;
     d->i_w = n; n += 2;
-    for (j = 0; j < N_JOINTS; j++) d->i_z[j] = d->friction[j] == FRICTION_LUGRE ? n++ : NO_STATE;
-    if (d->basic && n < 6) n = 6;  /* fixed layout; unused z have zero derivative */
+    if (d->basic) {  /* fixed layout [th, w, z1, z2]: deriv_basic() reads z of joint j at 4 + j */
+        for (j = 0; j < N_JOINTS; j++) d->i_z[j] = d->friction[j] == FRICTION_LUGRE ? 4 + j : NO_STATE;
+        n = 6;       /* an unused z has zero derivative */
+    } else {
+        for (j = 0; j < N_JOINTS; j++) d->i_z[j] = d->friction[j] == FRICTION_LUGRE ? n++ : NO_STATE;
+    }
     if (d->has_act_lag) { d->i_ta = n; n += 2; } else d->i_ta = NO_STATE;
     for (j = 0; j < N_JOINTS; j++) {
         if (d->trans[j]) { d->i_qm[j] = n++; d->i_wm[j] = n++; }

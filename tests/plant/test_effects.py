@@ -134,3 +134,19 @@ def test_lugre_friction_sticks_below_coulomb_level(slave, level):
     balance = np.mean(run.y["tau_f[1]"][-1000:] + run.y["tau_h[1]"][-1000:])
     assert balance == pytest.approx(0.5 * fl["Fc"], rel=2e-3)
     assert np.mean(run.y["tau_f[1]"][-1000:]) > 0.9 * 0.5 * fl["Fc"]
+
+
+@pytest.mark.parametrize("joint", [1, 2])
+@pytest.mark.parametrize("extra", [{}, {"actuator_lag.time_constant_s": 1e-3}], ids=["fast_path", "general_path"])
+def test_lugre_on_one_joint_only(slave, joint, extra):
+    """Friction on one joint: its z and tau_f carry a stuck torque, the other joint has none."""
+    other = 3 - joint
+    params = {f"friction.Fc[{joint}]": 0.4, f"friction.Fs[{joint}]": 0.6, f"friction.sigma2[{joint}]": 0.08, **extra}
+    u = np.zeros((3000, 2))
+    u[:, joint - 1] = 0.2
+    names = tuple(f"{v}[{j}]" for v in ("z", "tau_f", "tau_h") for j in (1, 2))
+    run = run_plain(slave, params, u, outputs=names)
+    balance = np.mean(run.y[f"tau_f[{joint}]"][-1000:] + run.y[f"tau_h[{joint}]"][-1000:])
+    assert balance == pytest.approx(0.2, rel=2e-3)
+    assert np.mean(run.y[f"z[{joint}]"][-1000:]) * 1e3 == pytest.approx(np.mean(run.y[f"tau_f[{joint}]"][-1000:]), rel=0.05)
+    assert np.all(run.y[f"z[{other}]"] == 0.0) and np.all(run.y[f"tau_f[{other}]"] == 0.0)

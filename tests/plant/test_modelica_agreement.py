@@ -38,7 +38,7 @@ EFFECTS = {"actuator_lag.time_constant_s": 0.003,
 EXAMPLES = {  # example model -> FMU parameters of the same experiment
     "SumOfSines": {},
     "SumOfSinesFriction": friction_parameters(3),
-    "SumOfSinesEffects": EFFECTS,
+    "SumOfSinesEffects": {**EFFECTS, **friction_parameters(2)},  # friction on the motor side
 }
 
 
