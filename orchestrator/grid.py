@@ -167,8 +167,6 @@ def _execute_dask(tasks, out_dir, scheduler):
 
 def _manifest(tasks, results, grid_options, wall_s) -> dict:
     trials = [results[t["name"]] for t in tasks]
-    for r in trials:
-        r.pop("traceback", None) if r["status"] != "failed" else None
     options = {k: (list(v) if isinstance(v, tuple) else v) for k, v in grid_options.items()
                if k != "fmu_path"}
     if grid_options.get("fmu_path") is not None:

@@ -45,7 +45,10 @@ def make_perturbation(level: int, seed: int, n_samples: int, n_dof: int = 2,
     ndarray [N m], shape (N, n_dof)
     """
     spec = ref.reference()["perturbation"]
-    peaks = np.asarray(ref.perturbation_peak(level) if peak is None else peak, dtype=float)
+    try:
+        peaks = np.asarray(ref.perturbation_peak(level) if peak is None else peak, dtype=float)
+    except ValueError as exc:
+        raise SetupError(str(exc)) from None
     if peaks.shape != (n_dof,):
         raise SetupError(f"perturbation peak has {peaks.size} values for n_dof={n_dof}; "
                          f"give peak= with one value per joint")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import copy
-import os
 import threading
 from pathlib import Path
 
@@ -129,8 +128,7 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
                 "generation_tool": plant.generation_tool},
         "arm": setup.arm_metadata(),
         "effects": copy.deepcopy(hidden.normalized),
-        "rk4_step": plant.parameters.get("rk4_step") if "rk4_step" not in required
-        else required["rk4_step"],
+        "rk4_step": required.get("rk4_step", plant.parameters.get("rk4_step")),
         "communication_step_s": ts / n_dec,
         "parameters": required,
         "declared_parameters_not_in_plant": absent,
@@ -231,8 +229,3 @@ def simulate_plant(setup, tau_applied, *, plant=None, effects=None, parameters=N
     n = setup.n_dof
     return {"theta": out[:, :n], "tau_h": out[:, n:2 * n]}
 
-
-def write_simulated_trial(stem, trial) -> Path:
-    """Write a trial atomically (trialformat.write_trial); return the CSV path."""
-    from trialformat import write_trial
-    return write_trial(os.fspath(stem), trial)

@@ -6,8 +6,7 @@ import pytest
 from scipy.signal import cont2discrete, dlsim
 
 from conftest import band, frf, rel_error
-from orchestrator import (IMBIC, ControllerConfig, DivergenceError, Setup, SetupError,
-                          simulate_trial)
+from orchestrator import IMBIC, DivergenceError, Setup, SetupError, simulate_trial
 from orchestrator.plants.linear_arm import _M_R
 from trialformat import read_trial, reference, write_trial
 

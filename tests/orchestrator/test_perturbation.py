@@ -54,5 +54,5 @@ def test_transient_discarded():
 def test_bad_input(kwargs, match):
     args = {"level": 1, "seed": 0, "n_samples": 100}
     args.update(kwargs)
-    with pytest.raises(ValueError, match=match):
+    with pytest.raises(SetupError, match=match):
         make_perturbation(**args)
