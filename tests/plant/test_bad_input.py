@@ -116,3 +116,28 @@ def test_absurd_parameter_blows_up_with_message(make_slave):
         for k in range(100):
             slave.doStep(k * 1e-3, 1e-3)
     assert "became non-finite" in log.text()
+
+
+def test_variable_communication_steps_and_start_time(make_slave):
+    """Whole multiples of rk4_step of any size, from any start time; the clock is exact."""
+    slave, _ = make_slave()
+    slave.setupExperiment(startTime=10.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    t = 10.0
+    for H in (1e-3, 2e-3, 5e-4, 1e-5, 0.0123):
+        slave.doStep(t, H)
+        t += H
+    assert slave.getRealStatus(2) == pytest.approx(10.0 + 0.01581, abs=1e-12)
+
+
+def test_same_trajectory_whatever_the_communication_grid(make_slave):
+    """Constant input: 1 x 10 ms, 10 x 1 ms and 1000 x 10 us give the same state (same RK4 steps)."""
+    out = []
+    for n, H in ((1, 1e-2), (10, 1e-3), (1000, 1e-5)):
+        slave, _ = _started(make_slave, friction_parameters(3))
+        slave.setReal([VR["tau_m[1]"], VR["tau_m[2]"]], [0.8, -0.5])
+        for k in range(n):
+            slave.doStep(k * H, H)
+        out.append(slave.getReal([VR[v] for v in ("theta[1]", "theta[2]", "omega[1]", "z[2]")]))
+    assert out[0] == out[1] == out[2]
