@@ -22,7 +22,7 @@
 /* ---- parameter checks ------------------------------------------------------ */
 
 static int refuse(ModelInstance *comp, int vr, const char *what) {
-    logError(comp, "fmi2ExitInitializationMode: parameter %s = %.15g refused: %s", VR_NAME[vr], comp->s.r[vr], what);
+    logError(comp, "parameter %s = %.15g refused: %s", VR_NAME[vr], comp->s.r[vr], what);
     return 1;
 }
 
@@ -138,7 +138,7 @@ int model_initialize(ModelInstance *comp) {
         const double dm = detAt(A11, A12, A21, A22, d->a3, -1.0);
         const double dp = detAt(A11, A12, A21, A22, d->a3, 1.0);
         if (!(dm > 0.0 && dp > 0.0 && A22 > 0.0)) {
-            logError(comp, "fmi2ExitInitializationMode: the mass matrix %s is singular or not positive definite "
+            logError(comp, "the mass matrix %s is singular or not positive definite "
                      "(det = %.6g at q2 = pi, %.6g at q2 = 0); check robot.* and arm.M_h",
                      d->has_iface ? "M_r(q)" : "M_r(q) + M_h", dm, dp);
             return 1;
@@ -146,7 +146,7 @@ int model_initialize(ModelInstance *comp) {
         if (d->has_iface) {
             const double det = d->Mh[0][0] * d->Mh[1][1] - d->Mh[0][1] * d->Mh[1][0];
             if (!(det > 0.0 && d->Mh[0][0] > 0.0)) {
-                logError(comp, "fmi2ExitInitializationMode: arm.M_h is singular or not positive definite "
+                logError(comp, "arm.M_h is singular or not positive definite "
                          "(det = %.6g), required with interface compliance", det);
                 return 1;
             }

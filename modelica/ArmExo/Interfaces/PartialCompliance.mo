@@ -7,4 +7,5 @@ partial model PartialCompliance "Torque between two sides a and b of n joints, f
   input ArmExo.Units.Angle phi_b[n] "Angle of side b";
   input ArmExo.Units.AngularVelocity w_b[n] "Velocity of side b";
   output ArmExo.Units.Torque tau[n] "Torque from side a to side b";
+  annotation (Documentation(info = "<html><p>Base of the spring-dampers between two sides of each joint (motor/link, link/arm): relative motion in, torque out.</p></html>"));
 end PartialCompliance;

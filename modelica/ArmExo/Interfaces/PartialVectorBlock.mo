@@ -4,4 +4,5 @@ partial model PartialVectorBlock "n inputs u, n outputs y"
   parameter Integer n = 2 "Number of joints";
   input Real u[n] "Input signal";
   output Real y[n] "Output signal";
+  annotation (Documentation(info = "<html><p>Base of vector blocks with n inputs u and n outputs y (one channel per joint).</p></html>"));
 end PartialVectorBlock;
