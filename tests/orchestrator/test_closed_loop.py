@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.signal import cont2discrete, dlsim
 
-from conftest import band, frf, rel_error
+from orch_helpers import band, frf, rel_error
 from orchestrator import IMBIC, DivergenceError, Setup, SetupError, simulate_trial
 from orchestrator.plants.linear_arm import _M_R
 from trialformat import read_trial, reference, write_trial

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from conftest import band, frf
+from orch_helpers import band, frf
 from orchestrator import Setup, simulate_trial
 from trialformat import reference
 
