@@ -95,6 +95,7 @@ class Sampler:
         self.ideal = self.r_theta == 0 and self.r_tau == 0 and theta_noise is None
         self._both = bool(self.r_theta and self.r_tau)
         self._resolutions = [self.r_theta] * n_dof + [self.r_tau] * n_dof
+        self._pairs = tuple(zip(self._resolutions, range(2 * n_dof)))
 
     def sample(self, n: int, outputs: list) -> list:
         """Measured ``[theta..., tau_h...]`` of sample n from the plant outputs (same order)."""
@@ -105,7 +106,7 @@ class Sampler:
             outputs = ([x + e for x, e in zip(outputs[:k], self.theta_noise[n])]
                        + [x + e for x, e in zip(outputs[k:], self.tau_noise[n])])
         if self._both:  # the common case: one pass
-            return [r * round(x / r) for x, r in zip(outputs, self._resolutions)]
+            return [r * round(outputs[i] / r) for r, i in self._pairs]
         return [r * round(x / r) if r else x for x, r in zip(outputs, self._resolutions)]
 
 
