@@ -196,6 +196,7 @@ def fig3(rows, variant):
             axes[a, 0].plot(x, [r[f"vaf_{e}"] for r in part], "o-", label=f"Z{e}")
             axes[a, 1].plot(x, [r[f"r2_{e}"] for r in part], "o-", label=f"Z{e}")
         for ax, name in zip(axes[a], ("VAF [%]", "R^2")):
+            ax.ticklabel_format(axis="y", useOffset=False)
             ax.set_xticks(x, labels, rotation=90, fontsize=7)
             ax.set_ylabel(f"{name}, level {level}")
     if levels:
@@ -218,6 +219,7 @@ def fig4(rows, variant):
         axes[a, 0].set_xticks(x, [f"F{r['friction']}R{r['resolution']}" for r in part],
                               rotation=90, fontsize=7)
         axes[a, 0].set_ylabel(f"mean coherence, level {level}")
+        axes[a, 0].ticklabel_format(axis="y", useOffset=False)
     if levels:
         axes[0, 0].legend(fontsize=7)
     fig.suptitle(f"Fig. 4: reliability ({variant})")
