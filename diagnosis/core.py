@@ -502,7 +502,10 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         extras={"nominal_all": nominal_all, "after_all": after, "ev_all": ev_all,
                 "chosen": chosen, "trials": trials})
     if out_dir is not None:
+        from pathlib import Path
+
         from .report import write_report
+        report.out_dir = Path(out_dir)
         write_report(report, out_dir)
     return report
 

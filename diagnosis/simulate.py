@@ -39,8 +39,10 @@ def simulate_like(trial, setup, effects: dict | None, n_samples: int, *, plant=N
                              seed=seed, effects=effects or None, plant=plant,
                              name=f"{trial.name}-sim")
     except (RuntimeError, FloatingPointError, OverflowError) as exc:
-        if type(exc).__name__ == "DivergenceError" or isinstance(exc, (FloatingPointError,
-                                                                          OverflowError)):
+        # a diverging loop, or a plant that refuses this model (e.g. an interface
+        # compliance with an estimated arm whose M_h is not positive definite)
+        if type(exc).__name__ in ("DivergenceError", "FMUCallError") or isinstance(
+                exc, (FloatingPointError, OverflowError)):
             return None
         raise DiagnosisSimulationError(f"simulating {trial.name}: {exc}") from exc
     if not all(np.isfinite(sim.signal(s)).all() for s in ("theta", "tau_h", "tau_m")):
