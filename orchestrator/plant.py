@@ -217,10 +217,14 @@ class Plant:
         self.parameters = {v.name: _start(v) for v in md.modelVariables
                            if v.causality == "parameter"}
         self._unzip_dir = fmpy.extract(str(self.path))
-        self._fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzip_dir,
-                              modelIdentifier=md.coSimulation.modelIdentifier,
-                              instanceName=instance_name)
-        _fmi("fmi2Instantiate", self._fmu.instantiate, loggingOn=False)
+        try:
+            self._fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzip_dir,
+                                  modelIdentifier=md.coSimulation.modelIdentifier,
+                                  instanceName=instance_name)
+            _fmi("fmi2Instantiate", self._fmu.instantiate, loggingOn=False)
+        except Exception:
+            shutil.rmtree(self._unzip_dir, ignore_errors=True)
+            raise
         self._initialized = False
         self._closed = False
         c = self.contract

@@ -22,6 +22,15 @@ from .errors import SetupError
 _ROBOT_SCALARS = ("m1", "L1", "lc1", "I1", "m2", "L2", "lc2", "I2")
 
 
+def _tuning_of(controller: dict) -> str:
+    """Name of the reference tuning whose Mbar and wn a controller block has, else custom."""
+    for name in ("reference", "robust"):
+        block = ref.controller(name)
+        if all(np.allclose(controller[k], block[k]) for k in ("Mbar", "wn")):
+            return name
+    return "custom"
+
+
 def _table_one():
     return tuple(m.copy() for m in ref.arm_matrices())
 
@@ -95,6 +104,8 @@ class Setup:
                   "sensors": ref.sensor_level(0), "controller": ref.controller("reference")}
         for key, default in blocks.items():
             default.update(copy.deepcopy(meta.get(key, {})))
+        if "tuning" not in meta.get("controller", {}):
+            blocks["controller"]["tuning"] = _tuning_of(blocks["controller"])
         return cls(n_dof=n, fs=float(meta.get("fs", 1.0 / r["timing"]["control_period_s"])),
                    posture_deg=list(meta.get("posture_deg", r["human_arm"]["posture_deg"])),
                    **blocks)

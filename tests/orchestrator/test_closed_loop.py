@@ -250,3 +250,12 @@ def test_bad_setup():
         Setup.reference(friction_level=5)
     with pytest.raises(SetupError, match="M_h"):
         Setup.reference().with_arm(np.eye(3), ZERO, ZERO)
+
+
+@pytest.mark.parametrize("tuning", ["reference", "robust"])
+def test_setup_from_metadata_without_tuning_key_infers_it(tuning):
+    meta = Setup.reference(tuning=tuning).to_metadata()
+    del meta["controller"]["tuning"]
+    assert Setup.from_metadata(meta).controller["tuning"] == tuning
+    meta["controller"]["Mbar"] = [0.5, 0.5]
+    assert Setup.from_metadata(meta).controller["tuning"] == "custom"
