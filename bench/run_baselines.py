@@ -1,10 +1,9 @@
-"""All-joints-perturbed trials for the MIMO baselines, one per paper-grid condition.
+"""All-joints-perturbed trials for the MIMO baselines: a thin call of the orchestrator grid.
 
-The orchestrator's grid holds only decomposition trials (one joint perturbed per trial);
-the closed-loop and direct MIMO estimators need every joint perturbed at once. This script
-(outside the estimation package, which must not import the orchestrator) simulates them
-with ``orchestrator.simulate_trial(..., perturbed_dof=None)``, named
-``fric{F}_res{R}_pert{P}_dofall``. Re-running skips trials already written.
+Equivalent to ``armimp grid OUT --dofs all``: one trial per condition with every joint
+perturbed at once by independent perturbations, named ``fric{F}_res{R}_pert{P}_dofall``,
+seed ``base + 10 P`` (orchestrator.grid.SEED_RULE, k = 0). Re-running skips trials
+already written. ``armimp paper`` runs these together with the decomposition grid.
 
     python bench/run_baselines.py runs/grid_alljoints [--tuning robust] [--duration 50]
 """
@@ -12,10 +11,7 @@ with ``orchestrator.simulate_trial(..., perturbed_dof=None)``, named
 import argparse
 from pathlib import Path
 
-from tqdm import tqdm
-
-import trialformat as tf
-from orchestrator import Setup, simulate_trial
+from orchestrator import run_grid
 
 
 def main(argv=None):
@@ -26,17 +22,16 @@ def main(argv=None):
     parser.add_argument("--friction", type=int, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--resolution", type=int, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--perturbation", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args(argv)
-    tasks = [(f, r, p) for f in args.friction for r in args.resolution for p in args.perturbation]
-    for f, r, p in tqdm(tasks, desc="all-joints trials"):
-        stem = args.out / f"fric{f}_res{r}_pert{p}_dofall"
-        if tf.trial_exists(stem):
-            continue
-        setup = Setup.reference(friction_level=f, resolution_level=r, tuning=args.tuning)
-        trial = simulate_trial(setup, perturbed_dof=None, level=p, seed=1000 + 10 * p,
-                               duration_s=args.duration)
-        tf.write_trial(stem, trial)
+    manifest = run_grid(args.out, workers=args.workers, dofs=["all"],
+                        friction_levels=args.friction, resolution_levels=args.resolution,
+                        perturbation_levels=args.perturbation, duration_s=args.duration,
+                        tuning=args.tuning)
+    print(f"all-joints trials: {manifest['n_done']} done, {manifest['n_skipped']} skipped, "
+          f"{manifest['n_failed']} failed -> {args.out}")
+    return 1 if manifest["n_failed"] else 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

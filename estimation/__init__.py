@@ -5,7 +5,8 @@ Stands alone: imports only trialformat, numpy, scipy and matplotlib. See docs/es
 
 from .accuracy import (SecondOrderFit, corrected_impedance, fit_impedance, fit_second_order,
                        left_limit_delay, true_impedance, vaf)
-from .conditions import Condition, condition_of, evaluate, group_conditions
+from .conditions import (PAPER, RECOMMENDED, VARIANTS, Condition, condition_of, evaluate,
+                         group_conditions, variant_impedance)
 from .errors import EstimationError, MatFileError
 from .estimator import METHODS, ImpedanceEstimate, band_mask, estimate_impedance
 from .io import read_trial, read_trials
@@ -14,7 +15,8 @@ from .spectral import (auto_spectrum, coherence, cross_spectrum, frequency_respo
                        ordinary_coherence)
 
 __all__ = ["SecondOrderFit", "corrected_impedance", "fit_impedance", "fit_second_order", "left_limit_delay", "true_impedance", "vaf",
-           "Condition", "condition_of", "evaluate", "group_conditions", "EstimationError",
+           "Condition", "condition_of", "evaluate", "group_conditions", "variant_impedance",
+           "VARIANTS", "RECOMMENDED", "PAPER", "EstimationError",
            "MatFileError", "METHODS", "ImpedanceEstimate", "band_mask", "estimate_impedance",
            "read_trial", "read_trials", "read_trial_mat", "write_trial_mat", "auto_spectrum",
            "coherence", "cross_spectrum", "frequency_response", "ordinary_coherence"]

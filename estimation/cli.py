@@ -13,7 +13,7 @@ from pathlib import Path
 
 from trialformat import reference as ref
 
-from .conditions import evaluate, group_conditions
+from .conditions import PAPER, RECOMMENDED, evaluate, group_conditions
 from .estimator import METHODS
 from .io import read_trials
 from .report import make_report
@@ -43,9 +43,12 @@ def register(subparsers) -> None:
                    help="folders of trials (e.g. a grid run and its all-joints trials)")
     p.add_argument("--out", type=Path, required=True, help="report folder")
     p.add_argument("--truth", choices=("none", "table1"), default="table1")
-    p.add_argument("--fig-variant", default="decomposition",
-                   help="variant shown in Figs. 2-4 (estimation.conditions.VARIANTS names; "
-                        "Fig. 2 shows that variant's raw estimate)")
+    p.add_argument("--fig-variant", default=RECOMMENDED,
+                   help="main variant of Figs. 2-4 (estimation.conditions.VARIANTS names; "
+                        f"default {RECOMMENDED}, the recommended bias-removing estimator)")
+    p.add_argument("--compare", default=PAPER,
+                   help=f"variant drawn beside it in Fig. 2, with its own Figs. 3-4 "
+                        f"(default {PAPER}, the paper's T/R; 'none' to omit)")
     p.set_defaults(func=run_figures)
 
 
@@ -87,7 +90,9 @@ def _describe(cond, row, has_truth) -> str:
 
 
 def run_figures(args) -> int:
-    result = make_report(args.folders, args.out, truth=args.truth, variant=args.fig_variant)
+    compare = None if args.compare.lower() == "none" else args.compare
+    result = make_report(args.folders, args.out, truth=args.truth, variant=args.fig_variant,
+                         compare=compare)
     for f in result["files"]:
         print(f)
     return 0
@@ -97,4 +102,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m estimation")
     register(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except (ValueError, OSError) as exc:
+        print(f"python -m estimation {args.command}: error: {exc}", file=sys.stderr)
+        return 1

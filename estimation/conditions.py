@@ -15,6 +15,7 @@ from trialformat import reference as ref
 
 from .accuracy import (corrected_impedance, fit_impedance, left_limit_delay, true_impedance,
                        vaf)
+from .errors import EstimationError
 from .estimator import estimate_impedance
 
 #: (name, estimator method, sampling compensation, leakage removal), evaluated per
@@ -30,6 +31,64 @@ VARIANTS = (
     ("direct", "direct", False, False),
     ("direct_sampling", "direct", True, False),
 )
+
+#: The recommended (bias-removing) variant and the paper's plain T/R.
+RECOMMENDED = "full_corrected"
+PAPER = "decomposition"
+
+#: Short descriptions of the variants, for figure titles and tables.
+VARIANT_LABELS = {
+    "decomposition": "paper: T/R, plain fit",
+    "decomposition_corrected": "paper's T/R, sampling + leakage corrected",
+    "full": "T P^-1, plain fit",
+    "full_sampling": "T P^-1, sampling corrected",
+    "full_corrected": "recommended: T P^-1, sampling + leakage corrected",
+    "closed_loop": "MIMO closed loop, all joints, plain fit",
+    "closed_loop_corrected": "MIMO closed loop, all joints, corrected",
+    "direct": "MIMO direct (open loop), all joints, plain fit",
+    "direct_sampling": "MIMO direct (open loop), all joints, sampling corrected",
+}
+
+
+def variant_spec(name) -> tuple:
+    """``(name, method, compensate_sampling, remove_leakage)`` of a variant in VARIANTS."""
+    for spec in VARIANTS:
+        if spec[0] == name:
+            return spec
+    raise EstimationError(f"unknown variant {name!r}; one of {[v[0] for v in VARIANTS]}")
+
+
+def uses_single_joint_trials(method) -> bool:
+    """True for the methods on decomposition trials, False for those on all-joints trials."""
+    return method in ("decomposition", "full")
+
+
+def variant_impedance(trials, variant, *, band_hz=(0.0, 15.0)):
+    """The band frequencies [Hz] and the impedance [N m/rad] a variant scores.
+
+    The raw estimate for a plain variant; the corrected estimate
+    (:func:`estimation.accuracy.corrected_impedance`) for a corrected one. Trials of the
+    wrong kind for the variant's method are ignored.
+
+    Returns
+    -------
+    f : ndarray [Hz], shape (nb,)
+    Z : ndarray [N m/rad], complex, shape (nb, n, n)
+    """
+    _, method, compensate, leakage = variant_spec(variant)
+    use = [t for t in trials
+           if (t.perturbed_dof is not None) == uses_single_joint_trials(method)]
+    est = estimate_impedance(use, method=method, band_hz=band_hz)
+    _, Z = _fit_and_impedance(est, compensate, leakage)
+    return est.f[est.band], Z
+
+
+def _fit_and_impedance(est, compensate, leakage):
+    delay = left_limit_delay(est.fs) if compensate else 0.0
+    fit = fit_impedance(est, inertia_delay_s=delay, leakage=leakage)
+    Z = corrected_impedance(est, fit, leakage=leakage) if (compensate or leakage) \
+        else est.Z[est.band]
+    return fit, Z
 
 
 @dataclass(frozen=True, order=True)
@@ -104,7 +163,7 @@ def evaluate(trials, *, truth=None, variants=VARIANTS, band_hz=(0.0, 15.0)) -> l
     has_all = any(t.perturbed_dof is None for t in trials)
     rows, cache = [], {}
     for name, method, compensate, leakage in variants:
-        needs_single = method in ("decomposition", "full")
+        needs_single = uses_single_joint_trials(method)
         if (needs_single and not has_single) or (not needs_single and not has_all):
             continue
         use = [t for t in trials if (t.perturbed_dof is not None) == needs_single]
@@ -121,10 +180,8 @@ def score(est, *, truth=None, compensate=False, leakage=False, name="") -> dict:
     VAF is that of the raw estimate, or with corrections of the corrected estimate
     (:func:`estimation.accuracy.corrected_impedance`).
     """
-    delay = left_limit_delay(est.fs) if compensate else 0.0
-    fit = fit_impedance(est, inertia_delay_s=delay, leakage=leakage)
+    fit, Z = _fit_and_impedance(est, compensate, leakage)
     b = est.band
-    Z = corrected_impedance(est, fit, leakage=leakage) if (compensate or leakage) else est.Z[b]
     if truth is None:
         reference_Z = true_impedance(est.f[b], fit.M, fit.B, fit.K)
     else:

@@ -3,13 +3,16 @@
 ``make_report(folder, out)`` reads every trial, groups them into conditions by their
 metadata, scores each condition (:func:`estimation.conditions.evaluate`) and writes:
 
-- ``fig2_impedance.png``: true vs estimated Z (magnitude, phase; 2x2 elements) for the four
-  corner conditions (friction, resolution) in {0, 3}^2 at the highest perturbation level;
-- ``fig3_accuracy.png``: VAF and R^2 of every element over all conditions;
-- ``fig4_coherence.png``: band-mean derived coherence over all conditions;
+- ``fig2_impedance.png``: true vs estimated Z (magnitude, phase, relative error; 2x2
+  elements) for the four corner conditions (friction, resolution) in {0, 3}^2 at the
+  highest perturbation level, the recommended variant beside the paper's T/R;
+- ``fig3_accuracy.png``: VAF and R^2 of every element over all conditions (main variant;
+  ``fig3_accuracy_{compare}.png`` for the compared one, by default the paper's);
+- ``fig4_coherence.png``: band-mean derived coherence over all conditions (likewise);
 - ``table_conditions.csv`` (every figure, per element) and ``table_conditions.md``
   (summaries), ``table_parameters.csv``/``.md`` (fitted M, B, K against Table I, mean
-  and worst case over conditions), ``report.json``.
+  and worst case over conditions), ``table_summary.csv``/``.md`` (worst case per variant,
+  MIMO baselines included), ``report.json``.
 Files are written atomically (temporary name, then rename).
 """
 
@@ -32,14 +35,15 @@ from tqdm import tqdm  # noqa: E402
 from trialformat import reference as ref  # noqa: E402
 
 from .accuracy import true_impedance  # noqa: E402
-from .conditions import VARIANTS, evaluate, group_conditions  # noqa: E402
-from .estimator import estimate_impedance  # noqa: E402
+from .conditions import (PAPER, RECOMMENDED, VARIANT_LABELS, VARIANTS, evaluate,  # noqa: E402
+                         group_conditions, variant_impedance, variant_spec)
+from .errors import EstimationError  # noqa: E402
 from .io import read_trials  # noqa: E402
 
 ELEMENTS = ("11", "12", "21", "22")
 
 
-def make_report(folders, out, *, truth="table1", variant="decomposition",
+def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PAPER,
                 progress=True) -> dict:
     """Score every condition of the trials in ``folders`` and write figures and tables.
 
@@ -54,40 +58,106 @@ def make_report(folders, out, *, truth="table1", variant="decomposition",
         Compare with Table I (simulated trials), or, for lab data, with each estimate's
         own second-order fit.
     variant : str
-        Variant (estimation.conditions.VARIANTS) shown in Figs. 2-4; Fig. 2 plots the raw
-        estimate of its method.
+        Main variant (estimation.conditions.VARIANTS): drawn solid in Fig. 2, and in
+        ``fig3_accuracy.png`` / ``fig4_coherence.png``. Default: the recommended
+        bias-removing ``full_corrected``.
+    compare : str or None
+        Variant drawn dashed beside it in Fig. 2 and given its own
+        ``fig3_accuracy_{compare}.png`` / ``fig4_coherence_{compare}.png``. Default: the
+        paper's plain T/R (``decomposition``). None: main variant only.
 
     Returns
     -------
-    dict with ``rows`` (one per condition and variant) and the output ``files``.
+    dict with ``rows`` (one per condition and variant), ``summary`` (worst case per tuning
+    and variant, :func:`summarize`), ``skipped`` (condition and method pairs that could
+    not be estimated, e.g. a trial missing, with the reason) and the output ``files``.
     """
+    variants = [variant] + ([compare] if compare and compare != variant else [])
+    for name in variants:
+        variant_spec(name)  # unknown names fail before any work
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     arm = ref.arm_matrices() if truth == "table1" else None
     folders = [folders] if isinstance(folders, (str, os.PathLike)) else list(folders)
     paths = [p for folder in folders for p in
              sorted(Path(folder).glob("*.csv")) + sorted(Path(folder).glob("*.mat"))]
+    if not paths:
+        raise EstimationError(f"no trial (NAME.csv or NAME.mat) in {[str(f) for f in folders]}")
     trials = [t for p in tqdm(paths, desc="reading trials", disable=not progress)
               for t in read_trials([p])]
     groups = group_conditions(trials)
-    rows = []
+    rows, skipped = [], []
+    methods = list(dict.fromkeys(m for _, m, *_ in VARIANTS))
     for cond, group in tqdm(groups.items(), desc="estimating", disable=not progress):
-        for row in evaluate(group, truth=arm):
+        scored = []
+        for method in methods:  # one method's missing trials must not hide the others
+            try:
+                scored += evaluate(group, truth=arm,
+                                   variants=[v for v in VARIANTS if v[1] == method])
+            except EstimationError as exc:  # e.g. a joint's trial failed: report, go on
+                skipped.append({"condition": cond.label, "tuning": cond.tuning,
+                                "method": method, "trials": [t.name for t in group],
+                                "reason": str(exc)})
+        for row in scored:
             rows.append({"friction": cond.friction, "resolution": cond.resolution,
                          "perturbation": cond.perturbation, "tuning": cond.tuning,
                          "n_trials": len(group), **row})
+    if not rows:
+        raise EstimationError(f"no condition could be estimated: {skipped}")
+    summary = summarize(rows)
     files = [_write_rows(out / "table_conditions.csv", rows),
              _atomic_text(out / "table_conditions.md", conditions_markdown(rows, arm)),
-             *parameter_tables(rows, arm, out)]
-    method = next(m for name, m, *_ in VARIANTS if name == variant)
-    files.append(_save(fig2(groups, arm, method), out / "fig2_impedance.png"))
-    files.append(_save(fig3(rows, variant), out / "fig3_accuracy.png"))
-    files.append(_save(fig4(rows, variant), out / "fig4_coherence.png"))
-    summary = {"folders": [Path(f).name for f in folders], "truth": truth, "variant_in_figures": variant,
-               "n_trials": len(trials),
-               "n_conditions": len(groups), "rows": rows}
-    files.append(_atomic_text(out / "report.json", json.dumps(summary, indent=1)))
-    return {"rows": rows, "files": [str(f) for f in files]}
+             *parameter_tables(rows, arm, out),
+             _write_rows(out / "table_summary.csv", summary),
+             _atomic_text(out / "table_summary.md", summary_markdown(summary, arm))]
+    files.append(_save(fig2(groups, arm, variants), out / "fig2_impedance.png"))
+    for name in variants:
+        suffix = "" if name == variant else f"_{name}"
+        files.append(_save(fig3(rows, name), out / f"fig3_accuracy{suffix}.png"))
+        files.append(_save(fig4(rows, name), out / f"fig4_coherence{suffix}.png"))
+    report = {"folders": [Path(f).name for f in folders], "truth": truth,
+              "variant_in_figures": variant, "compared_variant": compare,
+              "n_trials": len(trials), "n_conditions": len(groups), "skipped": skipped,
+              "summary": summary, "rows": rows}
+    files.append(_atomic_text(out / "report.json", json.dumps(report, indent=1)))
+    return {"rows": rows, "summary": summary, "skipped": skipped,
+            "files": [str(f) for f in files]}
+
+
+def summarize(rows) -> list[dict]:
+    """Worst case over the conditions, per tuning and variant (in VARIANTS order).
+
+    VAF, R^2 and band-mean derived coherence: minimum over conditions and elements;
+    parameter errors (when the rows have a truth): largest |relative error| [%].
+    """
+    order = {name: i for i, (name, *_) in enumerate(VARIANTS)}
+    keys = sorted({(r["tuning"], r["variant"]) for r in rows},
+                  key=lambda k: (k[0], order.get(k[1], len(order))))
+    out = []
+    for tuning, name in keys:
+        sel = [r for r in rows if r["tuning"] == tuning and r["variant"] == name]
+        line = {"tuning": tuning, "variant": name,
+                "description": VARIANT_LABELS.get(name, ""), "n_conditions": len(sel),
+                "vaf_min": min(r["vaf_min"] for r in sel),
+                "r2_min": min(r["r2_min"] for r in sel),
+                "coh_min": min(r["coh_min"] for r in sel)}
+        for p in "MBK":
+            if f"err_{p}_max" in sel[0]:
+                line[f"err_{p}_max"] = max(r[f"err_{p}_max"] for r in sel)
+        out.append(line)
+    return out
+
+
+def summary_markdown(summary, arm) -> str:
+    """The worst-case table of :func:`summarize`, as Markdown."""
+    cols = ["tuning", "variant", "description", "n_conditions", "vaf_min", "r2_min",
+            "coh_min"] + (["err_M_max", "err_B_max", "err_K_max"] if arm else [])
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(_fmt(r.get(c)) for c in cols) + " |" for r in summary]
+    legend = ("\nWorst case over the conditions and the four elements: vaf_min [%], r2_min, "
+              "coh_min (band-mean derived coherence) are minima; err_*_max [%] the largest "
+              "|relative error| of the fitted M, B, K against Table I.\n")
+    return "\n".join(lines) + "\n" + legend
 
 
 # ----------------------------------------------------------------------------- tables
@@ -140,41 +210,88 @@ def _fmt(v) -> str:
 # ----------------------------------------------------------------------------- figures
 
 
-def fig2(groups, arm, method):
-    """True vs estimated Z for the corner conditions at the highest perturbation level."""
+CORNERS = ((0, 0), (0, 3), (3, 0), (3, 3))
+CORNER_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red")
+VARIANT_STYLES = ("-", "--", "-.")
+TRUTH_STYLE = {"color": "k", "ls": ":", "lw": 1.6, "zorder": 5}
+
+
+def _corner_label(friction, resolution) -> str:
+    return f"friction {friction}, resolution {resolution}"
+
+
+def fig2(groups, arm, variants):
+    """Estimated vs true Z for the corner conditions at the highest perturbation level.
+
+    Columns: the elements Z11, Z12, Z21, Z22. Rows: magnitude, phase and (with a truth)
+    the relative error ``|Zhat - Z| / |Z|`` [%], which separates the variants where the
+    curves overlap. Colour: corner condition (friction, resolution) in {0, 3}^2; line
+    style: variant (the first solid).
+    """
     levels = [c.perturbation for c in groups if isinstance(c.perturbation, int)]
     top = max(levels) if levels else None
-    corners = [(c, g) for c, g in groups.items() if c.perturbation == top
-               and (c.friction, c.resolution) in ((0, 0), (0, 3), (3, 0), (3, 3))]
-    fig, axes = plt.subplots(2, 4, figsize=(14, 6), sharex=True)
-    f_true = None
+    corners = sorted(((c, g) for c, g in groups.items() if c.perturbation == top
+                      and (c.friction, c.resolution) in CORNERS),
+                     key=lambda cg: (cg[0].friction, cg[0].resolution))
+    n_rows = 3 if arm is not None else 2
+    fig, axes = plt.subplots(n_rows, 4, figsize=(16, 3.2 * n_rows + 1.2), sharex=True,
+                             squeeze=False)
+    f_band = None
+    drawn = set()
     for cond, group in corners:
-        use = [t for t in group if (t.perturbed_dof is not None) ==
-               (method in ("decomposition", "full"))]
-        if not use:
-            continue
-        est = estimate_impedance(use, method=method)
-        b = est.band
-        f_true = est.f[b]
-        for j, e in enumerate(ELEMENTS):
-            z = est.Z[b, int(e[0]) - 1, int(e[1]) - 1]
-            axes[0, j].loglog(f_true, np.abs(z), label=f"F{cond.friction}R{cond.resolution}")
-            axes[1, j].semilogx(f_true, np.degrees(np.angle(z)))
-    if arm is not None and f_true is not None:
-        zt = true_impedance(f_true, *arm)
+        color = CORNER_COLORS[CORNERS.index((cond.friction, cond.resolution))]
+        for style, name in zip(VARIANT_STYLES, variants):
+            try:
+                f_band, Z = variant_impedance(group, name)
+            except EstimationError:  # trials of that kind missing: nothing to draw
+                continue
+            drawn.add((cond.friction, cond.resolution, name))
+            Zt = true_impedance(f_band, *arm) if arm is not None else None
+            for j, e in enumerate(ELEMENTS):
+                z = Z[:, int(e[0]) - 1, int(e[1]) - 1]
+                axes[0, j].loglog(f_band, np.abs(z), style, color=color, lw=1.2)
+                axes[1, j].semilogx(f_band, np.degrees(np.angle(z)), style, color=color,
+                                    lw=1.2)
+                if Zt is not None:
+                    zt = Zt[:, int(e[0]) - 1, int(e[1]) - 1]
+                    axes[2, j].loglog(f_band, 100 * np.abs(z - zt) / np.abs(zt), style,
+                                      color=color, lw=1.2)
+    if arm is not None and f_band is not None:
+        zt = true_impedance(f_band, *arm)
         for j, e in enumerate(ELEMENTS):
             z = zt[:, int(e[0]) - 1, int(e[1]) - 1]
-            axes[0, j].loglog(f_true, np.abs(z), "k--", label="Table I")
-            axes[1, j].semilogx(f_true, np.degrees(np.angle(z)), "k--")
+            axes[0, j].loglog(f_band, np.abs(z), **TRUTH_STYLE)
+            axes[1, j].semilogx(f_band, np.degrees(np.angle(z)), **TRUTH_STYLE)
     for j, e in enumerate(ELEMENTS):
         axes[0, j].set_title(f"Z{e}")
-        axes[1, j].set_xlabel("frequency [Hz]")
-    axes[0, 0].set_ylabel("|Z| [N m/rad]")
-    axes[1, 0].set_ylabel("phase [deg]")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"Fig. 2: true vs estimated impedance ({method}, perturbation level {top})")
-    fig.tight_layout()
+        axes[-1, j].set_xlabel("frequency [Hz]")
+        axes[0, j].set_ylabel(f"|Z{e}| [N m/rad]")
+        axes[1, j].set_ylabel(f"phase of Z{e} [deg]")
+        if arm is not None:
+            axes[2, j].set_ylabel("|Zhat - Z| / |Z| [%]")
+        for ax in axes[:, j]:
+            ax.grid(True, which="both", alpha=0.3)
+    fig.legend(handles=_fig2_legend(corners, variants, arm, drawn), loc="lower center",
+               ncol=4, fontsize=9, frameon=False)
+    truth = " vs Table I" if arm is not None else ""
+    fig.suptitle(f"Fig. 2: estimated impedance{truth}, four corner conditions at perturbation "
+                 f"level {top}", fontsize=12)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     return fig
+
+
+def _fig2_legend(corners, variants, arm, drawn):
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=CORNER_COLORS[CORNERS.index((c.friction, c.resolution))],
+                      label=_corner_label(c.friction, c.resolution)) for c, _ in corners]
+    handles += [Line2D([], [], color="k", ls=style,
+                       label=f"{name}: {VARIANT_LABELS.get(name, '')}"
+                       + ("" if any(d[2] == name for d in drawn) else " (no trials)"))
+                for style, name in zip(VARIANT_STYLES, variants)]
+    if arm is not None:
+        handles.append(Line2D([], [], **TRUTH_STYLE, label="Table I (true impedance)"))
+    return handles
 
 
 def _by_level(rows, variant):
@@ -183,25 +300,34 @@ def _by_level(rows, variant):
     return sel, levels
 
 
+def _condition_axis(ax, part, bottom):
+    x = np.arange(len(part))
+    ax.set_xticks(x, [f"F{r['friction']}R{r['resolution']}" for r in part], rotation=90,
+                  fontsize=8)
+    ax.grid(True, alpha=0.3)
+    ax.ticklabel_format(axis="y", useOffset=False)
+    if bottom:
+        ax.set_xlabel("condition: friction level F, sensor resolution level R")
+    return x
+
+
 def fig3(rows, variant):
     """VAF and R^2 of each element over the conditions, one row of panels per level."""
     sel, levels = _by_level(rows, variant)
-    fig, axes = plt.subplots(max(len(levels), 1), 2, figsize=(12, 3 * max(len(levels), 1)),
-                             squeeze=False)
+    n = max(len(levels), 1)
+    fig, axes = plt.subplots(n, 2, figsize=(13, 3.3 * n + 0.8), squeeze=False)
     for a, level in enumerate(levels):
         part = [r for r in sel if r["perturbation"] == level]
-        x = np.arange(len(part))
-        labels = [f"F{r['friction']}R{r['resolution']}" for r in part]
-        for e in ELEMENTS:
-            axes[a, 0].plot(x, [r[f"vaf_{e}"] for r in part], "o-", label=f"Z{e}")
-            axes[a, 1].plot(x, [r[f"r2_{e}"] for r in part], "o-", label=f"Z{e}")
-        for ax, name in zip(axes[a], ("VAF [%]", "R^2")):
-            ax.ticklabel_format(axis="y", useOffset=False)
-            ax.set_xticks(x, labels, rotation=90, fontsize=7)
-            ax.set_ylabel(f"{name}, level {level}")
+        for ax, key, name in ((axes[a, 0], "vaf", "VAF [%]"), (axes[a, 1], "r2", "R² [-]")):
+            x = _condition_axis(ax, part, a == len(levels) - 1)
+            for e in ELEMENTS:
+                ax.plot(x, [r[f"{key}_{e}"] for r in part], "o-", ms=4, label=f"Z{e}")
+            ax.set_ylabel(name)
+            ax.set_title(f"{name.split(' ')[0]}, perturbation level {level}", fontsize=10)
     if levels:
-        axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"Fig. 3: accuracy ({variant})")
+        axes[0, 0].legend(fontsize=8, ncol=4)
+    fig.suptitle(f"Fig. 3: accuracy per condition, {variant} "
+                 f"[{VARIANT_LABELS.get(variant, '')}]", fontsize=12)
     fig.tight_layout()
     return fig
 
@@ -209,20 +335,21 @@ def fig3(rows, variant):
 def fig4(rows, variant):
     """Band-mean derived coherence of each element over the conditions."""
     sel, levels = _by_level(rows, variant)
-    fig, axes = plt.subplots(max(len(levels), 1), 1, figsize=(8, 3 * max(len(levels), 1)),
-                             squeeze=False)
+    n = max(len(levels), 1)
+    fig, axes = plt.subplots(n, 1, figsize=(9, 3.3 * n + 0.8), squeeze=False)
     for a, level in enumerate(levels):
         part = [r for r in sel if r["perturbation"] == level]
-        x = np.arange(len(part))
+        ax = axes[a, 0]
+        x = _condition_axis(ax, part, a == len(levels) - 1)
         for e in ELEMENTS:
-            axes[a, 0].plot(x, [r[f"coh_{e}"] for r in part], "o-", label=f"Z{e}")
-        axes[a, 0].set_xticks(x, [f"F{r['friction']}R{r['resolution']}" for r in part],
-                              rotation=90, fontsize=7)
-        axes[a, 0].set_ylabel(f"mean coherence, level {level}")
-        axes[a, 0].ticklabel_format(axis="y", useOffset=False)
+            ax.plot(x, [r[f"coh_{e}"] for r in part], "o-", ms=4, label=f"Z{e}")
+        ax.set_ylabel("mean coherence [-]")
+        ax.set_title(f"derived coherence, band mean 0-15 Hz, perturbation level {level}",
+                     fontsize=10)
     if levels:
-        axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"Fig. 4: reliability ({variant})")
+        axes[0, 0].legend(fontsize=8, ncol=4)
+    fig.suptitle(f"Fig. 4: reliability per condition, {variant} "
+                 f"[{VARIANT_LABELS.get(variant, '')}]", fontsize=12)
     fig.tight_layout()
     return fig
 

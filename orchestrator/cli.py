@@ -35,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_simulate(sub)
     _add_grid(sub)
+    _add_paper(sub)
     _add_info(sub)
     for module in ("estimation.cli", "diagnosis.cli"):
         try:
@@ -89,7 +90,9 @@ def _simulate(args) -> int:
 
 # ----------------------------------------------------------------------------- grid
 def _add_grid(sub):
-    p = sub.add_parser("grid", help="run the paper grid (48 conditions x 2 joints)")
+    p = sub.add_parser("grid", help="run the paper grid (48 conditions x 2 joints)",
+                       description="Run a grid of trials into OUT (resumable). Seeds: "
+                                   "base + 10 P + k, k = 0 for all joints.")
     p.add_argument("out", help="output folder (re-running skips completed trials)")
     p.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
     p.add_argument("--scheduler", default=None,
@@ -98,7 +101,9 @@ def _add_grid(sub):
     p.add_argument("--friction", type=int, nargs="+", default=[0, 1, 2, 3])
     p.add_argument("--resolution", type=int, nargs="+", default=[0, 1, 2, 3])
     p.add_argument("--perturbation", type=int, nargs="+", default=[1, 2, 3])
-    p.add_argument("--dofs", type=int, nargs="+", default=[1, 2])
+    p.add_argument("--dofs", type=_dof, nargs="+", default=[1, 2],
+                   help="perturbed joints (1-based) and/or 'all' (every joint at once, "
+                        "named ..._dofall), e.g. --dofs 1 2 all (default: 1 2)")
     p.add_argument("--seed", type=int, default=0, help="base seed")
     p.add_argument("--tuning", default="reference", choices=("reference", "robust"))
     p.add_argument("--effects", default=None, help="hidden effects as JSON")
@@ -122,6 +127,42 @@ def _grid(args) -> int:
         if r["status"] == "failed":
             print(f"  FAILED {r['name']}: {r['error']}")
     return 1 if manifest["n_failed"] else 0
+
+
+# ----------------------------------------------------------------------------- paper
+def _add_paper(sub):
+    p = sub.add_parser(
+        "paper", help="the paper's study end to end: grid + all-joints trials + report",
+        description="Simulate the decomposition grid (96 trials) and the all-joints trials "
+                    "(48) into OUT/trials (resumable), then write the estimation report "
+                    "(Figs. 2-4, tables against Table I) into OUT/report and print the "
+                    "worst cases. --quick: the four corner conditions at perturbation "
+                    "level 3 with 20 s trials (12 trials, about a minute).")
+    p.add_argument("--out", required=True, help="run folder (re-running resumes)")
+    p.add_argument("--tuning", default="reference", choices=("reference", "robust"))
+    p.add_argument("--duration", type=float, default=None,
+                   help="trial length [s] (default 50; 20 with --quick)")
+    p.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    p.add_argument("--scheduler", default=None,
+                   help="Dask distributed scheduler address (e.g. tcp://127.0.0.1:8786)")
+    p.add_argument("--quick", action="store_true",
+                   help="small built-in default: corners F0/F3 x R0/R3, level 3, 20 s")
+    p.add_argument("--seed", type=int, default=0, help="base seed")
+    p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_paper)
+
+
+def _paper(args) -> int:
+    from .paper import run_paper, summary_lines
+
+    result = run_paper(args.out, quick=args.quick, tuning=args.tuning,
+                       duration_s=args.duration, workers=args.workers,
+                       scheduler=args.scheduler, progress=not args.no_progress,
+                       fmu_path=args.fmu, base_seed=args.seed)
+    print("\n".join(summary_lines(result)))
+    incomplete = result["grid"]["n_failed"] or result["skipped_conditions"]
+    return 1 if incomplete else 0
 
 
 # ----------------------------------------------------------------------------- info
@@ -150,6 +191,16 @@ def _info(args) -> int:
     for name, value in info["parameters"].items():
         print(f"  {name} = {value}")
     return 0
+
+
+def _dof(text):
+    from .grid import parse_dof
+
+    try:
+        k = parse_dof(text)
+    except SetupError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return "all" if k is None else k
 
 
 def _int(text, option):

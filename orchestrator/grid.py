@@ -1,9 +1,15 @@
 """The paper grid (reference.md section 9): 4 friction x 4 resolution x 3 perturbation
 levels x one trial per joint, run in parallel, resumable, failures reported.
 
+The joints of a grid (``dofs``) are 1-based joints (decomposition trials, one joint
+perturbed) and/or ``"all"`` (None): every joint perturbed at once by independent
+perturbations, the trials of the MIMO baselines, named ``..._dofall``.
+
 Seeds: the perturbation of a trial depends only on its perturbation level P and joint k,
-``seed = base_seed + 10 * P + k``, so the 16 friction/resolution conditions at one level
-and joint see the same tau_delta and differ only by the factor.
+``seed = base_seed + 10 * P + k`` with k = 0 for the all-joints trial, so the 16
+friction/resolution conditions at one level and joint see the same tau_delta and differ
+only by the factor. The all-joints trial draws every column from its own seed: its
+perturbations are independent of each other and of the decomposition trials'.
 """
 
 from __future__ import annotations
@@ -24,27 +30,56 @@ from trialformat import trial_exists, write_trial
 from .errors import SetupError
 
 GRID_FORMAT = "arm-impedance-grid/1"
+SEED_RULE = ("seed = base_seed + 10 * perturbation_level + k, k = perturbed_dof "
+             "(0 for all joints)")
+ALL_JOINTS = "all"
 MANIFEST = "grid.json"
 FAILURES = "failures.json"
 
 
 def trial_name(friction_level, resolution_level, perturbation_level, dof) -> str:
-    """``fric{F}_res{R}_pert{P}_dof{k}``."""
-    return f"fric{friction_level}_res{resolution_level}_pert{perturbation_level}_dof{dof}"
+    """``fric{F}_res{R}_pert{P}_dof{k}``, or ``..._dofall`` for all joints (dof None/"all")."""
+    k = ALL_JOINTS if parse_dof(dof) is None else dof
+    return f"fric{friction_level}_res{resolution_level}_pert{perturbation_level}_dof{k}"
+
+
+def parse_dof(dof):
+    """A grid joint: a 1-based int, or None for all joints (given as None or ``"all"``)."""
+    if dof is None or (isinstance(dof, str) and dof.strip().lower() == ALL_JOINTS):
+        return None
+    try:
+        k = int(dof)
+    except (TypeError, ValueError):
+        raise SetupError(f"dof must be a 1-based joint or 'all', got {dof!r}") from None
+    if k < 1 or k != float(dof):
+        raise SetupError(f"dof must be a 1-based joint or 'all', got {dof!r}")
+    return k
+
+
+def grid_seed(base_seed, perturbation_level, dof) -> int:
+    """The perturbation seed of a grid trial (:data:`SEED_RULE`)."""
+    k = parse_dof(dof)
+    return int(base_seed) + 10 * int(perturbation_level) + (0 if k is None else k)
 
 
 def grid_tasks(*, friction_levels=(0, 1, 2, 3), resolution_levels=(0, 1, 2, 3),
                perturbation_levels=(1, 2, 3), dofs=(1, 2), duration_s=50.0, base_seed=0,
                tuning="reference", effects=None, fmu_path=None) -> list:
-    """The grid's trials as plain dicts (picklable task descriptions)."""
+    """The grid's trials as plain dicts (picklable task descriptions).
+
+    ``dofs`` holds 1-based joints and/or ``"all"`` (or None): all joints perturbed at once.
+    """
+    joints = [parse_dof(k) for k in dofs]
+    if len(set(joints)) != len(joints):
+        raise SetupError(f"dofs lists a joint twice: {list(dofs)!r}")
     tasks = []
     for f in friction_levels:
         for r in resolution_levels:
             for p in perturbation_levels:
-                for k in dofs:
+                for k in joints:
                     tasks.append({"name": trial_name(f, r, p, k), "friction_level": f,
                                   "resolution_level": r, "perturbation_level": p,
-                                  "perturbed_dof": k, "seed": base_seed + 10 * p + k,
+                                  "perturbed_dof": k, "seed": grid_seed(base_seed, p, k),
                                   "duration_s": duration_s, "tuning": tuning,
                                   "effects": effects,
                                   "fmu_path": None if fmu_path is None else str(fmu_path)})
@@ -80,7 +115,8 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
     Parameters
     ----------
     out_dir : path
-        Folder for the trials (``fric{F}_res{R}_pert{P}_dof{k}.csv/.json``), the manifest
+        Folder for the trials (``fric{F}_res{R}_pert{P}_dof{k}.csv/.json``, ``k`` a joint
+        or ``all``), the manifest
         ``grid.json`` and ``failures.json``.
     workers : int
         Local processes (1: run in this process). Ignored with ``scheduler``.
@@ -169,10 +205,12 @@ def _manifest(tasks, results, grid_options, wall_s) -> dict:
     trials = [results[t["name"]] for t in tasks]
     options = {k: (list(v) if isinstance(v, tuple) else v) for k, v in grid_options.items()
                if k != "fmu_path"}
+    if "dofs" in options:
+        options["dofs"] = [ALL_JOINTS if parse_dof(k) is None else k for k in options["dofs"]]
     if grid_options.get("fmu_path") is not None:
         options["fmu"] = Path(grid_options["fmu_path"]).name
     return {"format": GRID_FORMAT,
-            "seeds": "seed = base_seed + 10 * perturbation_level + perturbed_dof",
+            "seeds": SEED_RULE,
             "options": options, "n_trials": len(trials),
             "n_done": sum(r["status"] == "done" for r in trials),
             "n_skipped": sum(r["status"] == "skipped" for r in trials),
