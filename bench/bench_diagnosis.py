@@ -15,13 +15,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 
 from diagnosis.report import _clean
-from diagnosis.validation import SetSpec, draw_specs, make_set, run_validation
+from diagnosis import catalogue as cat
+from diagnosis.validation import SetSpec, draw_specs, make_set, nominal_gap, run_validation
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -29,32 +31,130 @@ RESULTS = Path(__file__).resolve().parent / "results"
 def timing_run(work: Path) -> dict:
     """Diagnose an 8-trial set (2 joints x 4 seeds x 50 s, gravity withheld)."""
     from diagnosis import diagnose
+    cached = work / "timing_8trials.json"
+    if cached.is_file():
+        return json.loads(cached.read_text())
     spec = SetSpec("timing-8trials", (("gravity", {"tilt_deg": 5.0}),),
                    seeds=(101, 102, 103, 104), duration_s=50.0)
     folder = make_set(spec, work / "sets")
     t0 = time.perf_counter()
     report = diagnose(folder, work / "reports" / spec.name, progress=True)
-    return {"n_trials": len(report.trials), "elapsed_s": time.perf_counter() - t0,
-            "verdict": report.verdict, "named": report.named, "fitted": report.fitted,
-            "n_simulations": report.n_simulations}
+    result = {"n_trials": len(report.trials), "elapsed_s": time.perf_counter() - t0,
+              "verdict": report.verdict, "named": report.named, "fitted": report.fitted,
+              "n_simulations": report.n_simulations,
+              "load_average_1min_at_end": os.getloadavg()[0]}
+    cached.write_text(json.dumps(_clean(result), indent=2))
+    return result
+
+
+#: effects not detected at the low end of their realistic range: also tried stronger
+#: (multiples of the low end) to locate their floor
+STRONGER_FLOOR_POINTS = {"torque_sensor_lag": (2.0, 3.0, 4.0, 6.0)}
+
+#: parameters whose effect vanishes as they grow (compliances)
+STIFFNESSES = ("k_t", "k_s")
+
+
+def _cached_gap(spec: SetSpec, work: Path) -> dict:
+    """Nominal gap (clipped ``nominal_gap`` and unclipped ``excess``) of a set, made if
+    needed; cached in work/gaps/NAME.json (resumable). A truth model whose closed loop
+    leaves the torque limits gives ``{"error": ...}`` (obviously detectable)."""
+    path = work / "gaps" / f"{spec.name}.json"
+    if path.is_file():
+        return json.loads(path.read_text())
+    try:
+        result = nominal_gap(make_set(spec, work / "sets"))
+        value = ({"error": "nominal model diverges"} if result is None else
+                 {"nominal_gap": result.value, "excess": result.excess})
+    except Exception as exc:  # noqa: BLE001 - a diverging truth model is a result here
+        value = {"error": f"{type(exc).__name__}: {str(exc)[:200]}"}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(value))
+    return value
+
+
+def calibration_run(work: Path, duration_s: float, n_seeds: int,
+                    floors_wanted: bool = True) -> dict:
+    """Nominal-vs-nominal gaps (the significance threshold) and detectability floors.
+
+    Nominal sets: every declared friction level 0-2 x resolution level 0-2 x tuning
+    (reference, robust), ``n_seeds`` perturbation/noise seeds each; nothing withheld.
+    Floors: each effect withheld at f = 1, 1/2, 1/4 of the way from "off" to the low end
+    of its realistic range (delay: 1 sample only), declared levels 0, reference tuning
+    (robust where the effect needs it).
+    """
+    from tqdm.auto import tqdm
+    specs = [SetSpec(f"cal-f{f}-r{r}-{tuning}-{i}", (), seeds=(500 + 37 * i + 7 * f + 3 * r,),
+                     duration_s=duration_s, friction_level=f, resolution_level=r,
+                     tuning_override=tuning)
+             for f in range(3) for r in range(3) for tuning in ("reference", "robust")
+             for i in range(n_seeds)]
+    nominal = [{"set": s.name, "friction_level": s.friction_level,
+                "resolution_level": s.resolution_level, "tuning": s.tuning(),
+                **_cached_gap(s, work)}
+               for s in tqdm(specs, desc="nominal-vs-nominal", unit="set")]
+    floors = []
+    todo = []
+    for name, effect in (cat.CATALOGUE.items() if floors_wanted else ()):
+        fractions = (1.0,) if effect.fit == "integer" else (1.0, 0.5, 0.25)
+        if name in STRONGER_FLOOR_POINTS:
+            fractions += STRONGER_FLOOR_POINTS[name]
+        low_end = {p.name: p.realistic[1] if p.name in STIFFNESSES else p.realistic[0]
+                   for p in effect.parameters}
+        tuning = "robust" if effect.needs_robust_tuning(low_end) else "reference"
+        for frac in fractions:
+            # a stiffness is weakest at the top of its range: weaker means stiffer
+            params = {p.name: (p.realistic[1] / frac if p.name in STIFFNESSES else
+                               p.off + frac * (p.realistic[0] - p.off))
+                      for p in effect.parameters}
+            if effect.fit == "integer":
+                params = {k: int(v) for k, v in params.items()}
+            todo.append((name, frac, SetSpec(f"floor-{name}-{round(100 * frac)}pct", ((name, params),),
+                                             seeds=(900,), duration_s=duration_s,
+                                             tuning_override=tuning)))
+    for name, frac, spec in tqdm(todo, desc="detectability", unit="set"):
+        floors.append({"effect": name, "fraction_of_low_end": frac,
+                       "params": dict(spec.effects[0][1]), "tuning": spec.tuning(),
+                       **_cached_gap(spec, work)})
+    gaps = np.array([r.get("excess", np.inf) for r in nominal])
+    return {"duration_s": duration_s, "nominal": nominal, "floors": floors,
+            "nominal_max": float(gaps.max()), "nominal_p95": float(np.quantile(gaps, 0.95)),
+            "nominal_median": float(np.median(gaps)), "n_nominal": int(gaps.size)}
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--work", default="runs/diagnosis_validation",
                    help="folder for the sets and reports (resumable)")
-    p.add_argument("--per-effect", type=int, default=1)
-    p.add_argument("--nominal", type=int, default=3)
-    p.add_argument("--pairs", type=int, default=2)
+    p.add_argument("--per-effect", type=int, default=2)
+    p.add_argument("--nominal", type=int, default=4)
+    p.add_argument("--pairs", type=int, default=3)
     p.add_argument("--outside", type=int, default=1)
     p.add_argument("--duration", type=float, default=12.0, help="trial length [s]")
     p.add_argument("--seed", type=int, default=2024)
     p.add_argument("--timing", action="store_true", help="also time an 8-trial diagnosis")
+    p.add_argument("--calibrate", action="store_true",
+                   help="only measure nominal-vs-nominal gaps and detectability floors "
+                        "(writes bench/results/diagnosis_calibration.json)")
+    p.add_argument("--calibration-seeds", type=int, default=2)
+    p.add_argument("--no-floors", action="store_true",
+                   help="with --calibrate: nominal-vs-nominal gaps only")
     args = p.parse_args(argv)
     work = Path(args.work)
+    if args.calibrate:
+        cal = calibration_run(work, args.duration, args.calibration_seeds,
+                              floors_wanted=not args.no_floors)
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        (RESULTS / f"diagnosis_calibration_{args.duration:g}s.json").write_text(json.dumps(_clean(cal), indent=2))
+        print(json.dumps({k: v for k, v in cal.items() if k not in ("nominal", "floors")}))
+        for r in cal["floors"]:
+            print(f"{r['effect']:>24} x{r['fraction_of_low_end']:<5g} "
+                  f"{r.get('nominal_gap', r.get('error'))}")
+        return 0
     specs = draw_specs(np.random.default_rng(args.seed), n_per_effect=args.per_effect,
                        n_nominal=args.nominal, n_pairs=args.pairs, n_outside=args.outside,
-                       pairs=(("gravity", "sensor_noise"), ("friction", "torque_sensor_lag")),
+                       pairs=(("gravity", "sensor_noise"), ("friction", "torque_sensor_lag"),
+                              ("actuator_lag", "gravity")),
                        duration_s=args.duration)
     t0 = time.perf_counter()
     result = run_validation(specs, work, progress=True)

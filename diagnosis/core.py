@@ -73,7 +73,7 @@ class DiagnosisConfig:
     held_out_s: float = 16.0
     time_split_fraction: float = 0.6
     calibration_trials_per_joint: int = 1
-    significance_gap: float = 1.0
+    significance_gap: float = 0.25
     explained_fraction: float = 0.5
     pair_gain: float = 0.5
     n_top_for_pairs: int = 3
@@ -535,10 +535,10 @@ def _ranking_row(fit: EffectFit, g0_cal: float, g0_held: float) -> dict:
 
 
 def _residual_needs_pair(best: EffectFit, g0_cal: float, cfg: DiagnosisConfig) -> bool:
-    """A pair is tried when the best single leaves a significant calibration gap that is
-    more than (1 - explained_fraction) of the nominal one... or simply a large one."""
-    return best.calibration_gap > max(cfg.significance_gap,
-                                      (1 - cfg.explained_fraction) * g0_cal * 0.5)
+    """A pair is tried when the best single leaves a calibration gap that is still
+    significant (above the nominal-vs-nominal threshold): whatever is left is more than
+    noise, however much the single closed."""
+    return best.calibration_gap > cfg.significance_gap
 
 
 def _fit_pair(a: EffectFit, b: EffectFit, ev_cal: Evaluator, ev_held: Evaluator,

@@ -55,8 +55,13 @@ class SetSpec:
     friction_level: int = 0
     resolution_level: int = 0
     extra: dict = field(default_factory=dict)
+    tuning_override: str = ""
 
     def tuning(self) -> str:
+        """The declared tuning: ``tuning_override`` if set, else robust when an effect
+        needs it (effects.md)."""
+        if self.tuning_override:
+            return self.tuning_override
         robust = any(cat.get_effect(n).needs_robust_tuning(p) for n, p in self.effects)
         return "robust" if robust else "reference"
 
@@ -138,6 +143,26 @@ def _atomic_json(path: Path, obj) -> None:
     with os.fdopen(fd, "w", encoding="utf-8") as fh:
         json.dump(obj, fh, indent=2)
     os.replace(tmp, path)
+
+
+def nominal_gap(folder, *, config: DiagnosisConfig = DiagnosisConfig(), plant=None):
+    """The gap of the nominal model over all trials of ``folder`` (what the verdict
+    compares with the significance threshold), without any effect fit.
+
+    Returns
+    -------
+    GapResult or None
+        ``value`` is the (clipped) gap, ``excess`` the unclipped mean(z^2) - expected;
+        None when the nominal model diverges.
+    """
+    from .arm import estimate_arm
+    from .core import Evaluator, Unit
+    from .inputs import load_trials
+    from .simulate import nominal_setup
+    trials = load_trials(folder)
+    setup = nominal_setup(trials[0].meta, estimate_arm(trials))
+    units = [Unit(t, 0, t.n_samples, "all") for t in trials]
+    return Evaluator(setup, units, config, plant).gap({})
 
 
 def read_truth(folder) -> dict:
@@ -230,7 +255,11 @@ def summarise(rows) -> dict:
     """Headline figures over scored rows (targets of docs/diagnosis.md)."""
     failed = [r for r in rows if "error" in r]
     rows = [r for r in rows if "error" not in r]
-    single = [r for r in rows if len(r["truth"]) == 1]
+    for r in rows:
+        r["below_detectability"] = len(r["truth"]) == 1 and cat.below_detectability(
+            r["truth"][0], (r.get("truth_params") or {}).get(r["truth"][0], {}))
+    below = [r for r in rows if r["below_detectability"]]
+    single = [r for r in rows if len(r["truth"]) == 1 and not r["below_detectability"]]
     nominal = [r for r in rows if not r["truth"] and not r.get("outside_catalogue")]
     pairs = [r for r in rows if len(r["truth"]) == 2]
     outside = [r for r in rows if r.get("outside_catalogue")]
@@ -243,6 +272,8 @@ def summarise(rows) -> dict:
         "n_sets": len(rows),
         "top1_accuracy": _mean([1.0 if r.get("top1") else 0.0 for r in single]),
         "n_single": len(single),
+        "below_detectability": [{"set": r["set"], "params": r.get("truth_params"),
+                                 "verdict": r["verdict"], "named": r["named"]} for r in below],
         "parameter_within_20pct": _mean([1.0 if e <= 0.2 else 0.0 for e in param_err]),
         "median_parameter_error": float(np.median(param_err)) if param_err else None,
         "mean_held_out_reduction_named": _mean(reductions),
@@ -255,9 +286,27 @@ def summarise(rows) -> dict:
         "n_pairs": len(pairs),
         "outside_verdicts": [{"set": r["set"], "verdict": r["verdict"], "named": r["named"]}
                              for r in outside],
+        "per_effect": _per_effect(single),
         "mean_elapsed_s": _mean([r["elapsed_s"] for r in rows]),
         "failed_sets": [{"set": r["set"], "error": r["error"]} for r in failed],
     }
+
+
+def _per_effect(single) -> dict:
+    """Top-1, worst scored parameter error and worst held-out reduction per true effect."""
+    out = {}
+    for r in single:
+        e = out.setdefault(r["truth"][0], {"n": 0, "top1": 0, "max_parameter_error": None,
+                                           "min_held_out_reduction": None})
+        e["n"] += 1
+        if not r.get("top1"):
+            continue
+        e["top1"] += 1
+        for key, value, pick in (("max_parameter_error", r.get("max_scored_parameter_error"), max),
+                                 ("min_held_out_reduction", r.get("held_out_reduction"), min)):
+            if value is not None:
+                e[key] = value if e[key] is None else pick(e[key], value)
+    return out
 
 
 def _pct(v):
@@ -278,13 +327,20 @@ def score_markdown(summary: dict, rows) -> str:
              f"| held-out gap reduction (correctly named; mean / min) | >= 70 % | "
              f"{_pct(s['mean_held_out_reduction_named'])} / "
              f"{_pct(s['min_held_out_reduction_named'])} |",
+             f"| single effects below the detectability floor (not counted above) | - | "
+             f"{len(s['below_detectability'])} sets |",
              f"| false alarms, nothing withheld ({s['n_nominal']} sets) | 0 % | "
              f"{_pct(s['false_alarm_rate'])} |",
              f"| pairs: both named / at least one ({s['n_pairs']} sets) | - | "
              f"{_pct(s['pair_both_named'])} / {_pct(s['pair_one_named'])} |",
              f"| mean diagnosis time per set | - | {s['mean_elapsed_s']:.0f} s |" if
              s["mean_elapsed_s"] is not None else "| mean diagnosis time | - | - |",
-             "", "| set | truth | verdict | named | fitted vs truth (error) | held-out reduction |",
+             "", "| effect | sets | top-1 | worst scored parameter error | worst held-out "
+             "reduction |", "|---|---|---|---|---|"]
+    for name, e in s["per_effect"].items():
+        lines.append(f"| {name} | {e['n']} | {e['top1']}/{e['n']} | "
+                     f"{_pct(e['max_parameter_error'])} | {_pct(e['min_held_out_reduction'])} |")
+    lines += ["", "| set | truth | verdict | named | fitted vs truth (error) | held-out reduction |",
              "|---|---|---|---|---|---|"]
     for r in rows:
         if "error" in r:
@@ -295,7 +351,8 @@ def score_markdown(summary: dict, rows) -> str:
         errs = "; ".join(f"{k}: " + ", ".join(f"{p} {100 * v:.0f} %" for p, v in d.items())
                          for k, d in err.items()) or "-"
         red = r.get("held_out_reduction")
-        lines.append(f"| {r['set']} | {' + '.join(r['truth']) or ('outside' if r.get('outside_catalogue') else 'none')} | "
+        below = " (below floor)" if r.get("below_detectability") else ""
+        lines.append(f"| {r['set']}{below} | {' + '.join(r['truth']) or ('outside' if r.get('outside_catalogue') else 'none')} | "
                      f"{r['verdict']} | {' + '.join(r['named']) or '-'} | {errs} | "
                      f"{'-' if red is None else f'{100 * red:.0f} %'} |")
     return "\n".join(lines) + "\n"
