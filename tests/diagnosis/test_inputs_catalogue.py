@@ -110,3 +110,25 @@ def test_draws_lie_in_the_realistic_ranges(name):
 def test_parameter_error_is_relative_to_the_effect_size():
     err = relative_parameter_error("inertia_mismatch", {"scale": 1.22}, {"scale": 1.2})
     assert err["scale"] == pytest.approx(0.1)
+
+
+def test_missing_folder_is_refused_with_its_name(tmp_path):
+    with pytest.raises(DiagnosisInputError, match="nowhere"):
+        diagnose(tmp_path / "nowhere", progress=False)
+
+
+def test_data_file_without_metadata_names_the_file(tmp_path, make_linear_trial):
+    _write(tmp_path, make_linear_trial, "a")
+    _write(tmp_path, make_linear_trial, "b", perturbed_dof=2)
+    (tmp_path / "b.json").unlink()
+    with pytest.raises(DiagnosisInputError, match=r"b\.json"):
+        diagnose(tmp_path, progress=False)
+
+
+def test_disagreeing_robot_is_refused_before_any_simulation(tmp_path, make_linear_trial):
+    _write(tmp_path, make_linear_trial, "a")
+    trial = make_linear_trial(name="b", perturbed_dof=2)
+    trial.meta["robot"] = dict(trial.meta["robot"], m1=trial.meta["robot"]["m1"] * 1.1)
+    tf.write_trial(tmp_path / "b", trial)
+    with pytest.raises(DiagnosisInputError, match=r"'b'.*robot"):
+        diagnose(tmp_path, progress=False)

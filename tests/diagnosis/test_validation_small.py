@@ -1,12 +1,19 @@
 """A small validation in the default suite: withheld effects diagnosed blind.
 
-Three sets of two 10 s trials (one per joint) made by the project's simulator; the
-diagnosis tries a reduced list of effects to stay within the suite's time budget (the
-full catalogue is validated by bench/bench_diagnosis.py).
+Three sets of two 9 s trials (one per joint, the shortest a lone trial's time split
+allows) made by the project's simulator; the diagnosis tries a reduced list of effects to
+stay within the suite's time budget (the full catalogue is validated by
+bench/bench_diagnosis.py). The nominal set is diagnosed with one candidate only: its
+verdict rests on the nominal gap alone, which no candidate changes.
+
+Blindness is checked without a second diagnosis: the truth files are read for scoring
+first, then replaced by unparsable text, and every file the diagnosis opens is recorded.
 """
 
+import builtins
+import io
 import json
-import shutil
+from pathlib import Path
 
 import pytest
 
@@ -18,13 +25,15 @@ from diagnosis.validation import SetSpec, make_set, read_truth  # noqa: E402
 
 CONFIG = DiagnosisConfig(effects=("gravity", "sensor_noise", "friction"),
                          grid_points=4, refine_iterations=4)
+CONFIG_NOMINAL = DiagnosisConfig(effects=("gravity",), grid_points=3, refine_iterations=0)
+DURATION_S = 9.0
 SPECS = {
-    "nominal": SetSpec("nominal", (), seeds=(41,), duration_s=10.0, resolution_level=1),
+    "nominal": SetSpec("nominal", (), seeds=(41,), duration_s=DURATION_S, resolution_level=1),
     "gravity": SetSpec("gravity", (("gravity", {"tilt_deg": 3.0}),), seeds=(43,),
-                       duration_s=10.0),
+                       duration_s=DURATION_S),
     "sensor_noise": SetSpec("sensor_noise", (("sensor_noise", {"theta_noise_std_rad": 1.5e-5,
                                                                "tau_noise_std_nm": 0.01}),),
-                            seeds=(47,), duration_s=10.0),
+                            seeds=(47,), duration_s=DURATION_S),
 }
 
 
@@ -35,10 +44,39 @@ def sets(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def reports(sets, tmp_path_factory):
+def truths(sets):
+    """The truth of each set, read before the truth files are made unreadable."""
+    out = {name: read_truth(folder) for name, folder in sets.items()}
+    for folder in sets.values():
+        for f in Path(folder).glob("*.truth.json"):
+            f.write_text("{ not JSON: a diagnosis that parses this fails")
+    return out
+
+
+@pytest.fixture(scope="module")
+def opened_files():
+    return []
+
+
+@pytest.fixture(scope="module")
+def reports(sets, truths, opened_files, tmp_path_factory):
     out = tmp_path_factory.mktemp("reports")
-    return {name: diagnose(folder, out / name, config=CONFIG, progress=False)
-            for name, folder in sets.items()}
+    real_open = builtins.open
+
+    def spy(file, *args, **kwargs):
+        if isinstance(file, (str, Path)):
+            opened_files.append(str(file))
+        return real_open(file, *args, **kwargs)
+
+    patch = pytest.MonkeyPatch()
+    patch.setattr(builtins, "open", spy)
+    patch.setattr(io, "open", spy)
+    try:
+        return {name: diagnose(folder, out / name, progress=False,
+                               config=CONFIG_NOMINAL if name == "nominal" else CONFIG)
+                for name, folder in sets.items()}
+    finally:
+        patch.undo()
 
 
 def test_nothing_withheld_raises_no_alarm(reports):
@@ -47,9 +85,9 @@ def test_nothing_withheld_raises_no_alarm(reports):
 
 
 @pytest.mark.parametrize("name", ["gravity", "sensor_noise"])
-def test_withheld_effect_is_named_fitted_and_closes_the_held_out_gap(name, reports, sets):
+def test_withheld_effect_is_named_fitted_and_closes_the_held_out_gap(name, reports, truths):
     report = reports[name]
-    truth = read_truth(sets[name])["effects"][0]
+    truth = truths[name]["effects"][0]
     assert report.verdict == VERDICT_EFFECT
     assert report.named == [truth["name"]]
     errors = relative_parameter_error(name, report.fitted[name], truth["params"],
@@ -73,20 +111,8 @@ def report_dir(report):
     return Path(report.out_dir)
 
 
-def test_result_does_not_depend_on_the_truth_files(sets, reports, tmp_path):
-    """A copy of the set without its truth files gives the same diagnosis (to round-off)."""
-    blind = tmp_path / "blind"
-    shutil.copytree(sets["gravity"], blind)
-    deleted = list(blind.glob("*.truth.json"))
-    assert deleted
-    for f in deleted:
-        f.unlink()
-    first = reports["gravity"].to_dict()
-    again = diagnose(blind, config=CONFIG, progress=False).to_dict()
-    assert again["verdict"] == first["verdict"]
-    assert again["named_effects"] == first["named_effects"]
-    for effect, params in first["fitted_parameters"].items():
-        assert again["fitted_parameters"][effect] == pytest.approx(params, rel=1e-9)
-    for key in ("nominal_all", "nominal_held_out", "named_held_out"):
-        assert again["gap"][key] == pytest.approx(first["gap"][key], rel=1e-9, abs=1e-12)
-    assert [r["effects"] for r in again["ranking"]] == [r["effects"] for r in first["ranking"]]
+def test_diagnosis_reads_the_trials_but_never_a_truth_file(reports, opened_files):
+    """The spy saw the trial files being read (so it works) and no truth file."""
+    assert any(f.endswith(".csv") for f in opened_files)
+    assert any(f.endswith(".json") and not f.endswith(".truth.json") for f in opened_files)
+    assert not [f for f in opened_files if f.endswith(".truth.json")]
