@@ -35,12 +35,20 @@ def test_condition_from_metadata_not_names(grid_folder):
     assert condition_of(trial).friction == "custom"
 
 
-def test_report_files_and_tables(grid_folder, tmp_path):
-    result = make_report(grid_folder, tmp_path, progress=False)
-    names = {p.split("/")[-1] for p in result["files"]}
-    assert {"fig2_impedance.png", "fig3_accuracy.png", "fig4_coherence.png",
-            "table_conditions.csv", "table_conditions.md", "table_parameters.csv",
-            "table_parameters.md", "report.json"} <= names
+def test_report_files_and_tables(grid_folder, tmp_path, capsys):
+    assert main(["figures", str(grid_folder), "--out", str(tmp_path), "--compare",
+                 "none"]) == 0
+    names = {p.split("/")[-1] for p in capsys.readouterr().out.split()}
+    assert names == {"fig2_impedance.png", "fig3_accuracy.png", "fig4_coherence.png",
+                     "table_conditions.csv", "table_conditions.md", "table_parameters.csv",
+                     "table_parameters.md", "table_summary.csv", "table_summary.md",
+                     "report.json"}  # --compare none: no figures of the paper's variant
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["variant_in_figures"] == "full_corrected" and report["skipped"] == []
+    summary = {r["variant"]: r for r in report["summary"]}
+    assert len(summary) == 9 and summary["full"]["n_conditions"] == 2
+    assert summary["full"]["vaf_min"] == min(r["vaf_min"] for r in report["rows"]
+                                             if r["variant"] == "full")
     rows = list(csv.DictReader(open(tmp_path / "table_conditions.csv")))
     variants = {r["variant"] for r in rows}
     assert {"decomposition", "full_corrected", "closed_loop_corrected", "direct"} <= variants
@@ -59,3 +67,10 @@ def test_cli_estimate_writes_json(grid_folder, tmp_path, capsys):
     assert "F0R0P3" in text and "Z22" in text
     results = json.loads(out.read_text())
     assert len(results) == 2 and results[0]["leakage_removed"] is True
+
+
+def test_report_refuses_unknown_variant_and_empty_folder(grid_folder, tmp_path):
+    with pytest.raises(ValueError, match="unknown variant 'fast'"):
+        make_report(grid_folder, tmp_path, variant="fast", progress=False)
+    with pytest.raises(ValueError, match="no trial"):
+        make_report(tmp_path, tmp_path / "out", progress=False)
