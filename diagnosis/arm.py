@@ -34,6 +34,9 @@ class ArmModel:
     K: np.ndarray
     r2: np.ndarray
     method: str
+    f: np.ndarray | None = None
+    Z: np.ndarray | None = None
+    fs: float = 1000.0
 
     def to_dict(self) -> dict:
         return {"M_h": self.M.tolist(), "B_h": self.B.tolist(), "K_h": self.K.tolist(),
@@ -74,6 +77,81 @@ def estimate_arm(trials, *, nperseg: int = 8192) -> ArmModel:
     except ValueError as exc:
         raise DiagnosisInputError(f"cannot estimate the arm impedance from the trials "
                                   f"{[t.name for t in trials]}: {exc}") from None
-    fit = fit_second_order(est.f, est.Z, inertia_delay_s=left_limit_delay(est.fs))
+    return _fit(est.f, est.Z, est.fs, method)
+
+
+def _fit(f, Z, fs, method) -> ArmModel:
+    from estimation.accuracy import fit_second_order, left_limit_delay
+    fit = fit_second_order(f, Z, inertia_delay_s=left_limit_delay(fs))
     return ArmModel(M=np.asarray(fit.M, float), B=np.asarray(fit.B, float),
-                    K=np.asarray(fit.K, float), r2=np.asarray(fit.r2, float), method=method)
+                    K=np.asarray(fit.K, float), r2=np.asarray(fit.r2, float), method=method,
+                    f=np.asarray(f), Z=np.asarray(Z), fs=fs)
+
+
+def link_inertia(meta: dict) -> np.ndarray:
+    """Link-side inertia of the declared 2-joint robot at the posture, without the motor
+    inertias Jm [kg m^2] (reference.md section 3: M_r(q) - diag(Jm))."""
+    r = meta["robot"]
+    q2 = np.radians(meta["posture_deg"][1])
+    a1 = r["I1"] + r["m1"] * r["lc1"] ** 2 + r["I2"] + r["m2"] * (r["L1"] ** 2 + r["lc2"] ** 2)
+    a2 = r["I2"] + r["m2"] * r["lc2"] ** 2
+    a3 = r["m2"] * r["L1"] * r["lc2"]
+    c = a3 * np.cos(q2)
+    return np.array([[a1 + 2 * c, a2 + c], [a2 + c, a2]])
+
+
+def arm_behind_transmission(arm: ArmModel, k_t, c_t, m_link) -> ArmModel | None:
+    """The arm seen through a compliant transmission (encoder on the motor side), with
+    the transmission and the link inertia between it and the sensor removed.
+
+    With K_c = k_t + j w c_t and Z_link = -w^2 M_link, the link obeys
+    K_c (theta_mot - theta_link) = tau_h + Z_link theta_link, so
+    Z_arm = (Z_meas^-1 - K_c^-1)^-1 (I + K_c^-1 Z_link). None when not possible.
+    """
+    if arm.Z is None:
+        return None
+    w, good, n = _grid(arm)
+    kc = _diag(k_t, c_t, w, n)
+    zl = (-w ** 2)[:, None, None] * np.asarray(m_link, float)[None]
+    try:
+        kci = np.linalg.inv(kc)
+        behind = np.linalg.inv(np.linalg.inv(arm.Z[good]) - kci) @ (np.eye(n) + kci @ zl)
+        return _checked(_fit(arm.f[good], behind, arm.fs, arm.method + " behind transmission"))
+    except (np.linalg.LinAlgError, ValueError, ArithmeticError):
+        return None
+
+
+def _grid(arm):
+    good = (arm.f > 0) & np.isfinite(arm.Z).all(axis=(1, 2))
+    return 2 * np.pi * arm.f[good], good, arm.Z.shape[1]
+
+
+def _diag(k, c, w, n):
+    z = np.asarray(k, float)[None, :] + 1j * w[:, None] * np.asarray(c, float)[None, :]
+    return z[:, :, None] * np.eye(n)[None]
+
+
+def _checked(out: ArmModel) -> ArmModel | None:
+    if not all(np.isfinite(m).all() for m in (out.M, out.B, out.K)):
+        return None
+    return out
+
+
+def arm_behind_cuff(arm: ArmModel, k_s, c_s) -> ArmModel | None:
+    """The arm seen through a compliant cuff, with the cuff removed.
+
+    With a cuff (stiffness ``k_s`` [N m/rad], damping ``c_s`` [N m s/rad] per joint)
+    between the robot link and the arm, the impedance estimated from the link angle and
+    the cuff torque is the series combination Z_meas^-1 = Z_arm^-1 + Z_cuff^-1, far from
+    second order when the cuff is soft (the fit then gives a negative inertia). A
+    candidate cuff is therefore simulated with Z_arm = (Z_meas^-1 - Z_cuff^-1)^-1 refitted
+    to second order. None when that is not possible (no stored estimate, singular).
+    """
+    if arm.Z is None:
+        return None
+    w, good, n = _grid(arm)
+    try:
+        behind = np.linalg.inv(np.linalg.inv(arm.Z[good]) - np.linalg.inv(_diag(k_s, c_s, w, n)))
+        return _checked(_fit(arm.f[good], behind, arm.fs, arm.method + " behind cuff"))
+    except (np.linalg.LinAlgError, ValueError, ArithmeticError):
+        return None

@@ -26,7 +26,8 @@ from scipy import signal as sps
 from tqdm.auto import tqdm
 
 from . import catalogue as cat
-from .arm import ArmModel, estimate_arm
+from .arm import (ArmModel, arm_behind_cuff, arm_behind_transmission, estimate_arm,
+                  link_inertia)
 from .errors import DiagnosisInputError
 from .features import FeatureConfig, grid_step, trial_features
 from .gap import GapResult, make_normaliser, set_gap
@@ -157,8 +158,10 @@ class Evaluator:
     """
 
     def __init__(self, setup, units, cfg: DiagnosisConfig, plant=None,
-                 cache: dict | None = None):
+                 cache: dict | None = None, setup_for=None):
         self.setup, self.units, self.cfg, self.plant = setup, units, cfg, plant
+        # the set-up a candidate is simulated with (the arm behind a candidate cuff)
+        self.setup_for = setup_for or (lambda effects: setup)
         self.n_dof = units[0].trial.n_dof
         self._sims: dict = {} if cache is None else cache
         self.n_simulations = 0
@@ -182,7 +185,8 @@ class Evaluator:
         have = self._sims.get(key)
         # a model that diverged once is not run again (it is unstable)
         if have is None or (have[1] is not None and have[0] < unit.stop):
-            sim = simulate_like(unit.trial, self.setup, effects, unit.stop, plant=self.plant)
+            sim = simulate_like(unit.trial, self.setup_for(effects), effects, unit.stop,
+                                plant=self.plant)
             self._sims[key] = (unit.stop, sim)
             self.n_simulations += 1
         return self._sims[key][1]
@@ -440,16 +444,17 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     cal, held, rule = split_units(trials, config)
     arm = estimate_arm(trials)
     setup = nominal_setup(trials[0].meta, arm)
+    setup_for = _setup_factory(trials[0].meta, arm, setup)
     full_units = [Unit(t, 0, t.n_samples, "all") for t in trials]
     bar = tqdm(total=3 + len(config.effects), desc="diagnosis", disable=not progress,
                unit="step")
     bar.set_postfix_str("nominal")
     cache: dict = {}
-    ev_all = Evaluator(setup, full_units, config, plant, cache)
+    ev_all = Evaluator(setup, full_units, config, plant, cache, setup_for)
     nominal_all = ev_all.gap({})
     bar.update()
-    ev_cal = Evaluator(setup, cal, config, plant, cache)
-    ev_held = Evaluator(setup, held, config, plant, cache)
+    ev_cal = Evaluator(setup, cal, config, plant, cache, setup_for)
+    ev_held = Evaluator(setup, held, config, plant, cache, setup_for)
     g0_cal, g0_held = ev_cal.gap_value({}), ev_held.gap_value({})
     bar.update()
     singles = []
@@ -490,7 +495,8 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
              "named_all": None if after is None else after.value},
         where={"nominal": where_breakdown(nominal_all),
                "named": None if after is None else where_breakdown(after)},
-        arm=arm.to_dict(),
+        arm={**arm.to_dict(), "behind_named_compliance": None if chosen is None else
+             _behind_dict(arm, chosen.simulation_effects(trials[0].n_dof), trials[0].meta)},
         split={"rule": rule,
                "calibration": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
                                for u in cal],
@@ -508,6 +514,48 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         report.out_dir = Path(out_dir)
         write_report(report, out_dir)
     return report
+
+
+#: effects that sit between the robot's sensors and the arm: a candidate is simulated
+#: with the arm estimate seen through it removed (arm.py)
+COMPLIANCES = ("transmission_compliance", "interface_compliance")
+
+
+def _arm_for(arm, effects: dict, meta: dict):
+    """The arm a candidate model simulates: the estimate with the candidate's
+    transmission and/or cuff removed (motor side first), else the estimate itself.
+    None when the removal fails."""
+    out = arm
+    trans = effects.get("transmission_compliance")
+    if trans and out is not None:
+        out = arm_behind_transmission(out, trans["k_t"], trans["c_t"], link_inertia(meta))
+    cuff = effects.get("interface_compliance")
+    if cuff and out is not None:
+        out = arm_behind_cuff(out, cuff["k_s"], cuff["c_s"])
+    return out
+
+
+def _behind_dict(arm, effects: dict, meta: dict):
+    if not any(e in effects for e in COMPLIANCES):
+        return None
+    behind = _arm_for(arm, effects, meta)
+    return None if behind is None else behind.to_dict()
+
+
+def _setup_factory(meta: dict, arm, nominal):
+    """effects -> Setup: the nominal one, or one with the arm behind a candidate
+    compliance; cached per compliance."""
+    cache: dict = {}
+
+    def setup_for(effects: dict):
+        if not any(e in effects for e in COMPLIANCES):
+            return nominal
+        key = _effects_key({e: effects.get(e) for e in COMPLIANCES})
+        if key not in cache:
+            behind = _arm_for(arm, effects, meta)
+            cache[key] = nominal if behind is None else nominal_setup(meta, behind)
+        return cache[key]
+    return setup_for
 
 
 def _config_dict(cfg: DiagnosisConfig) -> dict:
