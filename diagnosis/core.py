@@ -62,7 +62,6 @@ class DiagnosisConfig:
     pair_gain : float
         A pair is preferred to the best single effect when its calibration gap is below
         this fraction of the single's.
-    n_top_for_pairs : int
     grid_points, refine_iterations : int
         Bounded 1-D search: coarse (log-)grid, then Brent refinement in the best bracket.
     effects : tuple of str
@@ -77,7 +76,6 @@ class DiagnosisConfig:
     significance_gap: float = 0.25
     explained_fraction: float = 0.5
     pair_gain: float = 0.5
-    n_top_for_pairs: int = 3
     grid_points: int = 5
     refine_iterations: int = 6
     effects: tuple = tuple(cat.CATALOGUE)
@@ -471,8 +469,13 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     best = singles[0]
     if significant and _residual_needs_pair(best, g0_cal, config):
         bar.set_postfix_str("pairs")
-        for a, b in combinations(singles[:config.n_top_for_pairs], 2):
-            pairs.append(_fit_pair(a, b, ev_cal, ev_held, trials[0].n_dof))
+        partners = [f for f in singles[1:] if math.isfinite(f.calibration_gap)]
+        seconds = [_fit_second(best, other, ev_cal, trials[0].n_dof) for other in partners]
+        seconds.sort(key=lambda f: (f.calibration_gap, f.objective))
+        if seconds:
+            pairs = [_refine_pair(seconds[0], ev_cal, trials[0].n_dof)] + seconds[1:]
+        for fit in pairs:
+            fit.held_out_gap = ev_held.gap_value(fit.simulation_effects(trials[0].n_dof))
         pairs.sort(key=lambda f: (f.calibration_gap, f.objective))
     bar.update()
     bar.close()
@@ -589,20 +592,30 @@ def _residual_needs_pair(best: EffectFit, g0_cal: float, cfg: DiagnosisConfig) -
     return best.calibration_gap > cfg.significance_gap
 
 
-def _fit_pair(a: EffectFit, b: EffectFit, ev_cal: Evaluator, ev_held: Evaluator,
-              n_dof: int) -> EffectFit:
-    """Fit a pair by one round of coordinate descent from the single-effect fits."""
-    ea, eb = a.effects[0], b.effects[0]
-    pa, pb = a.params[ea], b.params[eb]
+def _fit_second(best: EffectFit, other: EffectFit, ev_cal: Evaluator,
+                n_dof: int) -> EffectFit:
+    """Forward selection: fit ``other`` on top of the best single (its full bounds: what it
+    fitted alone, under the first effect's gap, says little)."""
+    ea, eb = best.effects[0], other.effects[0]
+    pa = best.params[ea]
     n0 = ev_cal.n_simulations
-    pa, _, _, _ = fit_effect(ea, ev_cal, base={eb: cat.expand_effect(eb, pb, n_dof)},
-                             around=pa)
-    pb, gap, _, obj = fit_effect(eb, ev_cal, base={ea: cat.expand_effect(ea, pa, n_dof)},
-                                 around=pb)
-    fit = EffectFit((ea, eb), {ea: _jsonable(pa), eb: _jsonable(pb)}, gap,
-                    ev_cal.n_simulations - n0, objective=obj)
-    fit.held_out_gap = ev_held.gap_value(fit.simulation_effects(n_dof))
-    return fit
+    pb, gap, _, obj = fit_effect(eb, ev_cal, base={ea: cat.expand_effect(ea, pa, n_dof)})
+    return EffectFit((ea, eb), {ea: dict(pa), eb: _jsonable(pb)}, gap,
+                     ev_cal.n_simulations - n0, objective=obj)
+
+
+def _refine_pair(fit: EffectFit, ev_cal: Evaluator, n_dof: int) -> EffectFit:
+    """One more coordinate step on the best pair: the first effect refitted (search
+    narrowed to a factor 3) with the second in place."""
+    ea, eb = fit.effects
+    pb = fit.params[eb]
+    n0 = ev_cal.n_simulations
+    pa, gap, _, obj = fit_effect(ea, ev_cal, base={eb: cat.expand_effect(eb, pb, n_dof)},
+                                 around=fit.params[ea])
+    if not gap < fit.calibration_gap:
+        return fit
+    return EffectFit((ea, eb), {ea: _jsonable(pa), eb: dict(pb)}, gap,
+                     fit.n_evaluations + ev_cal.n_simulations - n0, objective=obj)
 
 
 def _verdict(significant, singles, pairs, g0_held, cfg):
