@@ -35,3 +35,18 @@ def linear_plant(linear_fmu):
         plant = Plant(linear_fmu)
     with plant:
         yield plant
+
+
+@pytest.fixture
+def joint_two_diverges(monkeypatch):
+    """Make every joint-2 trial of a grid diverge (one sample of delay under the reference
+    tuning), so a test can check that a failure is reported and the rest completes."""
+    import orchestrator.trial
+    real = orchestrator.trial.simulate_trial
+
+    def fail_joint_two(setup, **kwargs):
+        if kwargs["perturbed_dof"] == 2:
+            kwargs["effects"] = {"delay": {"samples": 1}}
+        return real(setup, **kwargs)
+
+    monkeypatch.setattr(orchestrator.trial, "simulate_trial", fail_joint_two)

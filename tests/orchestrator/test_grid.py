@@ -5,7 +5,6 @@ import json
 import numpy as np
 import pytest
 
-import orchestrator.trial
 from orchestrator import grid_tasks, run_grid, trial_name
 from trialformat import read_trial, trial_exists
 
@@ -38,15 +37,7 @@ def test_grid_in_process_writes_trials_manifest_and_resumes(reference_fmu, tmp_p
     assert again["n_skipped"] == 2 and again["n_done"] == 0
 
 
-def test_failed_trial_reported_and_others_complete(reference_fmu, tmp_path, monkeypatch):
-    real = orchestrator.trial.simulate_trial
-
-    def fail_joint_two(setup, **kwargs):
-        if kwargs["perturbed_dof"] == 2:
-            kwargs["effects"] = {"delay": {"samples": 1}}  # diverges with this tuning
-        return real(setup, **kwargs)
-
-    monkeypatch.setattr(orchestrator.trial, "simulate_trial", fail_joint_two)
+def test_failed_trial_reported_and_others_complete(reference_fmu, tmp_path, joint_two_diverges):
     m = run_grid(tmp_path, workers=1, progress=False, fmu_path=reference_fmu, **SMALL)
     assert m["n_done"] == 1 and m["n_failed"] == 1
     failures = json.loads((tmp_path / "failures.json").read_text())["failures"]

@@ -89,15 +89,7 @@ def _must_not_simulate(*args, **kwargs):
     raise AssertionError("a resumed paper run simulated a trial")
 
 
-def test_paper_failed_trial_reported_rest_completes(reference_fmu, tmp_path, monkeypatch):
-    real = orchestrator.trial.simulate_trial
-
-    def fail_joint_two(setup, **kwargs):
-        if kwargs["perturbed_dof"] == 2:
-            kwargs["effects"] = {"delay": {"samples": 1}}  # diverges with this tuning
-        return real(setup, **kwargs)
-
-    monkeypatch.setattr(orchestrator.trial, "simulate_trial", fail_joint_two)
+def test_paper_failed_trial_reported_rest_completes(reference_fmu, tmp_path, joint_two_diverges):
     result = run_paper(tmp_path, workers=1, progress=False, fmu_path=reference_fmu, **TINY)
     assert result["grid"]["n_failed"] == 1 and result["grid"]["n_done"] == 2
     assert "DivergenceError" in result["grid"]["failures"][0]["error"]
