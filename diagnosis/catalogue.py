@@ -23,6 +23,11 @@ FRICTION_SIGMA2_OVER_FC = 0.2      # sigma2 [N m s/rad] = 0.2 [s/rad] * Fc
 TRANSMISSION_DAMPING_TIME_S = 1e-3  # c_t = 1 ms * k_t
 INTERFACE_DAMPING_TIME_S = 5e-3     # c_s = 5 ms * k_s
 
+# A fitted value within this fraction of the search span (log span for log parameters)
+# of a search bound is "at search bound": the fit wanted to go further, so the value is
+# absorbing model error rather than measuring the effect, and the effect is not named.
+BOUND_TOLERANCE = 0.02
+
 
 @dataclass(frozen=True)
 class Parameter:
@@ -59,6 +64,29 @@ class Parameter:
     off: float = 0.0
     scored: bool = True
     detectable_from: float | None = None
+    physical_low: bool = False
+
+    def search_bound_hit(self, value: float, tol: float = BOUND_TOLERANCE) -> str | None:
+        """``"lower"``/``"upper"`` when ``value`` lies on (within ``tol`` of the search
+        span) or beyond that search bound, else None.
+
+        The span is measured on the search scale (log for log parameters); a lower bound
+        flagged ``physical_low`` is never reported.
+        """
+        lo, hi = self.bounds
+        if self.log:
+            if not value > 0:
+                return None if self.physical_low else "lower"
+            to_x = math.log
+        else:
+            to_x = float
+        x, xlo, xhi = to_x(value), to_x(lo), to_x(hi)
+        margin = tol * (xhi - xlo)
+        if x >= xhi - margin:
+            return "upper"
+        if x <= xlo + margin and not self.physical_low:
+            return "lower"
+        return None
 
 
 @dataclass(frozen=True)
@@ -130,7 +158,8 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
             _p("tau_noise_std_nm", "N m", (0.003, 0.03), (1e-5, 0.3), scored=False)),
            fit="noise"),
     Effect("delay", "the command of sample n acts from (n+d) Ts",
-           (_p("samples", "samples", (1, 3), (1, 3), log=False),), fit="integer",
+           (_p("samples", "samples", (1, 3), (1, 5), log=False, physical_low=True),),
+           fit="integer",
            always_robust=True),
     Effect("actuator_lag", "first-order lag between command and applied torque",
            (_p("time_constant_s", "s", (1.5e-3, 6e-3), (2e-4, 2e-2)),),
@@ -188,6 +217,23 @@ def below_detectability(name: str, params: dict) -> bool:
     if any(f is None or p.name not in params for p, f in floors):
         return False
     return all(abs(params[p.name] - p.off) < abs(f - p.off) for p, f in floors)
+
+
+def at_search_bound(name: str, params: dict, tol: float = BOUND_TOLERANCE) -> list[str]:
+    """The scored primary parameters of a fit of ``name`` that lie on a search bound,
+    e.g. ``["k_s = 3000 at upper search bound"]``; empty when none.
+
+    Unscored parameters (not identifiable by the experiment, e.g. the torque noise of
+    ``sensor_noise``) may wander anywhere and are not checked.
+    """
+    out = []
+    for p in get_effect(name).parameters:
+        if not p.scored or p.name not in params:
+            continue
+        side = p.search_bound_hit(float(params[p.name]), tol)
+        if side is not None:
+            out.append(f"{p.name} = {float(params[p.name]):.4g} at {side} search bound")
+    return out
 
 
 def relative_parameter_error(name: str, fitted: dict, truth: dict, *,

@@ -239,6 +239,17 @@ class EffectFit:
     def simulation_effects(self, n_dof) -> dict:
         return {e: cat.expand_effect(e, self.params[e], n_dof) for e in self.effects}
 
+    @property
+    def at_search_bound(self) -> list:
+        """Scored parameters fitted on a search bound (catalogue.at_search_bound), as
+        ``"effect: param = value at upper search bound"``; such a fit is never named."""
+        return [f"{e}: {flag}" for e in self.effects
+                for flag in cat.at_search_bound(e, self.params[e])]
+
+    @property
+    def nameable(self) -> bool:
+        return math.isfinite(self.calibration_gap) and not self.at_search_bound
+
 
 def fit_effect(name: str, ev: Evaluator, base: dict | None = None,
                around: dict | None = None) -> tuple[dict, float, int]:
@@ -466,10 +477,10 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     singles.sort(key=lambda f: (f.calibration_gap, f.objective))
     significant = nominal_all.value > config.significance_gap
     pairs = []
-    best = singles[0]
-    if significant and _residual_needs_pair(best, g0_cal, config):
+    best = next((f for f in singles if f.nameable), None)
+    if significant and best is not None and _residual_needs_pair(best, g0_cal, config):
         bar.set_postfix_str("pairs")
-        partners = [f for f in singles[1:] if math.isfinite(f.calibration_gap)]
+        partners = [f for f in singles if f is not best and math.isfinite(f.calibration_gap)]
         seconds = [_fit_second(best, other, ev_cal, trials[0].n_dof) for other in partners]
         seconds.sort(key=lambda f: (f.calibration_gap, f.objective))
         if seconds:
@@ -582,7 +593,8 @@ def _ranking_row(fit: EffectFit, g0_cal: float, g0_held: float) -> dict:
             "calibration_reduction": _reduction(g0_cal, fit.calibration_gap),
             "held_out_gap": fit.held_out_gap,
             "held_out_reduction": _reduction(g0_held, fit.held_out_gap),
-            "n_simulations": fit.n_evaluations}
+            "n_simulations": fit.n_evaluations,
+            "at_search_bound": fit.at_search_bound}
 
 
 def _residual_needs_pair(best: EffectFit, g0_cal: float, cfg: DiagnosisConfig) -> bool:
@@ -619,13 +631,31 @@ def _refine_pair(fit: EffectFit, ev_cal: Evaluator, n_dof: int) -> EffectFit:
 
 
 def _verdict(significant, singles, pairs, g0_held, cfg):
-    """(verdict, named effects, chosen fit) from the ranked fits."""
+    """(verdict, named effects, chosen fit) from the ranked fits.
+
+    Only fits with no parameter on a search bound are candidates. The best such single is
+    replaced by a pair only when the pair's second effect earns its place on both the
+    calibration gap and the held-out gap (:func:`_pair_earns_second`).
+    """
     if not significant:
         return VERDICT_NONE, [], None
-    best = singles[0]
-    chosen = best
-    if pairs and pairs[0].calibration_gap < cfg.pair_gain * best.calibration_gap:
-        chosen = pairs[0]
+    best = next((f for f in singles if f.nameable), None)
+    if best is None:
+        return VERDICT_UNEXPLAINED, [], None
+    chosen = next((p for p in pairs if p.nameable and p.effects[0] == best.effects[0]
+                   and _pair_earns_second(p, best, cfg)), best)
     if _reduction(g0_held, chosen.held_out_gap) >= cfg.explained_fraction:
         return VERDICT_EFFECT, list(chosen.effects), chosen
     return VERDICT_UNEXPLAINED, [], None
+
+
+def _pair_earns_second(pair: EffectFit, single: EffectFit, cfg: DiagnosisConfig) -> bool:
+    """True when adding the pair's second effect shrinks the gap significantly: below
+    ``pair_gain`` times the single's gap on the calibration units AND on the held-out
+    units, and on the held-out units by more than the significance threshold (what
+    nominal-vs-nominal noise can do). A second effect that only fits the calibration
+    units is absorbing noise or model error, not measuring an effect."""
+    held_drop = single.held_out_gap - pair.held_out_gap
+    return bool(pair.calibration_gap < cfg.pair_gain * single.calibration_gap
+                and pair.held_out_gap < cfg.pair_gain * single.held_out_gap
+                and held_drop > cfg.significance_gap)

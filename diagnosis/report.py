@@ -104,7 +104,7 @@ def markdown(report) -> str:
               "| rank | effect | fitted | calibration gap | held-out gap | held-out reduction | runs |",
               "|---|---|---|---|---|---|---|"]
     for i, r in enumerate(report.ranking, 1):
-        lines.append(f"| {i} | {' + '.join(r['effects'])} | {_params(r['params'])} | "
+        lines.append(f"| {i} | {' + '.join(r['effects'])} | {_params(r['params'])}{_bound(r)} | "
                      f"{_fmt(r['calibration_gap'])} | {_fmt(r['held_out_gap'])} | "
                      f"{_fmt(100 * r['held_out_reduction'])} % | {r['n_simulations']} |")
     if report.pairs:
@@ -112,7 +112,7 @@ def markdown(report) -> str:
                   "| effects | fitted | calibration gap | held-out gap | held-out reduction |",
                   "|---|---|---|---|---|"]
         for r in report.pairs:
-            lines.append(f"| {' + '.join(r['effects'])} | {_params(r['params'])} | "
+            lines.append(f"| {' + '.join(r['effects'])} | {_params(r['params'])}{_bound(r)} | "
                          f"{_fmt(r['calibration_gap'])} | {_fmt(r['held_out_gap'])} | "
                          f"{_fmt(100 * r['held_out_reduction'])} % |")
     lines += ["", "## Signals", "", f"![frf]({FIGURES['frf']})", "",
@@ -165,6 +165,12 @@ def _plot_where(report, path: Path) -> None:
     fig.colorbar(im, ax=axes[0].tolist(), label="log10(1 + gap)")
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
+
+
+def _bound(row: dict) -> str:
+    """Flag for a fit on a search bound (never named)."""
+    flags = row.get("at_search_bound") or []
+    return f" (at search bound: {'; '.join(flags)})" if flags else ""
 
 
 def _plot_ranking(report, path: Path) -> None:

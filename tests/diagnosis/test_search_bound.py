@@ -1,0 +1,99 @@
+"""Fits on a search bound are never named; a pair needs its second effect to shrink the
+held-out gap too (synthetic fit results, no simulation)."""
+
+import math
+
+import pytest
+
+from diagnosis import CATALOGUE, DiagnosisConfig
+from diagnosis.catalogue import BOUND_TOLERANCE, at_search_bound
+from diagnosis.core import VERDICT_EFFECT, VERDICT_UNEXPLAINED, EffectFit, _verdict
+
+CFG = DiagnosisConfig()
+
+
+def _fit(params: dict, cal: float, held: float) -> EffectFit:
+    return EffectFit(tuple(params), params, cal, 10, held_out_gap=held, objective=cal)
+
+
+# transmission_compliance-0 of the full validation (runs before the fix): the nominal gaps
+# and the ranked fits, rounded.
+G0_HELD = 708.0
+TRANSMISSION = _fit({"transmission_compliance": {"k_t": 512.4}}, 23.7, 17.9)
+INERTIA_AT_BOUND = _fit({"inertia_mismatch": {"scale": 2.0}}, 656.7, 525.0)
+PAIR_CUFF_AT_BOUND = _fit({"transmission_compliance": {"k_t": 459.5},
+                           "interface_compliance": {"k_s": 3000.0}}, 9.5, 7.5)
+PAIR_INERTIA = _fit({"transmission_compliance": {"k_t": 512.4},
+                     "inertia_mismatch": {"scale": 1.225}}, 14.0, 10.1)
+
+
+def test_a_second_effect_fitted_on_its_search_bound_is_not_named():
+    verdict, named, chosen = _verdict(True, [TRANSMISSION, INERTIA_AT_BOUND],
+                                      [PAIR_CUFF_AT_BOUND, PAIR_INERTIA], G0_HELD, CFG)
+    assert verdict == VERDICT_EFFECT
+    assert named == ["transmission_compliance"]
+    assert chosen is TRANSMISSION
+
+
+def test_a_pair_off_its_bounds_is_still_named_when_it_closes_the_held_out_gap():
+    pair = _fit({"friction": {"Fc": 0.128}, "torque_sensor_lag": {"time_constant_s": 3.3e-3}},
+                0.05, 0.0)
+    single = _fit({"friction": {"Fc": 0.132}}, 8.4, 7.7)
+    verdict, named, _ = _verdict(True, [single], [pair], 62.2, CFG)
+    assert (verdict, named) == (VERDICT_EFFECT, ["friction", "torque_sensor_lag"])
+
+
+def test_a_pair_that_only_shrinks_the_calibration_gap_is_not_named():
+    single = _fit({"friction": {"Fc": 0.132}}, 8.4, 7.7)
+    overfit = _fit({"friction": {"Fc": 0.13}, "gravity": {"tilt_deg": 5.0}}, 1.0, 7.6)
+    verdict, named, _ = _verdict(True, [single], [overfit], 62.2, CFG)
+    assert (verdict, named) == (VERDICT_EFFECT, ["friction"])
+
+
+def test_a_held_out_drop_within_noise_does_not_earn_a_second_effect():
+    single = _fit({"friction": {"Fc": 0.132}}, 0.30, 0.30)   # already near the noise level
+    pair = _fit({"friction": {"Fc": 0.13}, "gravity": {"tilt_deg": 5.0}}, 0.10, 0.10)
+    _, named, _ = _verdict(True, [single], [pair], 62.2, CFG)
+    assert named == ["friction"]
+
+
+def test_the_best_single_on_its_bound_is_flagged_and_the_next_one_considered():
+    at_bound = _fit({"interface_compliance": {"k_s": 3000.0}}, 1.0, 1.0)
+    second = _fit({"gravity": {"tilt_deg": 6.0}}, 2.0, 2.0)
+    verdict, named, _ = _verdict(True, [at_bound, second], [], 100.0, CFG)
+    assert at_bound.at_search_bound == ["interface_compliance: k_s = 3000 at upper search bound"]
+    assert (verdict, named) == (VERDICT_EFFECT, ["gravity"])
+    verdict, named, _ = _verdict(True, [at_bound], [], 100.0, CFG)
+    assert (verdict, named) == (VERDICT_UNEXPLAINED, [])
+
+
+@pytest.mark.parametrize("name", list(CATALOGUE))
+def test_search_bounds_are_wider_than_the_realistic_ranges(name):
+    """No realistic value can be flagged "at search bound": the realistic range keeps
+    at least 5 times the tolerance away from each bound (except a physical lower one)."""
+    effect = CATALOGUE[name]
+    for p in effect.parameters:
+        if not p.scored:
+            continue
+        realistic = list(p.realistic)
+        if effect.sign_choice:
+            realistic += [2 * p.off - v for v in p.realistic]
+        for v in realistic:
+            assert at_search_bound(name, {p.name: v}, 5 * BOUND_TOLERANCE) == [], (p.name, v)
+        assert p.search_bound_hit(p.bounds[1]) == "upper"
+        lower = p.search_bound_hit(p.bounds[0])
+        assert lower == (None if p.physical_low else "lower")
+
+
+def test_delay_of_one_sample_is_not_a_bound_but_the_largest_searched_delay_is():
+    assert at_search_bound("delay", {"samples": 1}) == []
+    assert at_search_bound("delay", {"samples": 3}) == []
+    assert at_search_bound("delay", {"samples": 5}) != []
+
+
+def test_a_fit_beyond_a_bound_or_at_zero_is_flagged():
+    assert at_search_bound("quantization", {"encoder_resolution_deg": 0.0,
+                                            "torque_resolution_nm": 0.01}) != []
+    assert at_search_bound("friction", {"Fc": 0.0201}) != []
+    assert math.isinf(_fit({"gravity": {"tilt_deg": 5.0}}, math.inf, 1.0).calibration_gap)
+    assert not _fit({"gravity": {"tilt_deg": 5.0}}, math.inf, 1.0).nameable
