@@ -313,43 +313,36 @@ def _condition_axis(ax, part, bottom):
 
 def fig3(rows, variant):
     """VAF and R^2 of each element over the conditions, one row of panels per level."""
-    sel, levels = _by_level(rows, variant)
-    n = max(len(levels), 1)
-    fig, axes = plt.subplots(n, 2, figsize=(13, 3.3 * n + 0.8), squeeze=False)
-    for a, level in enumerate(levels):
-        part = [r for r in sel if r["perturbation"] == level]
-        for ax, key, name in ((axes[a, 0], "vaf", "VAF [%]"), (axes[a, 1], "r2", "R² [-]")):
-            x = _condition_axis(ax, part, a == len(levels) - 1)
-            for e in ELEMENTS:
-                ax.plot(x, [r[f"{key}_{e}"] for r in part], "o-", ms=4, label=f"Z{e}")
-            ax.set_ylabel(name)
-            ax.set_title(f"{name.split(' ')[0]}, perturbation level {level}", fontsize=10)
-    if levels:
-        axes[0, 0].legend(fontsize=8, ncol=4)
-    fig.suptitle(f"Fig. 3: accuracy per condition, {variant} "
-                 f"[{VARIANT_LABELS.get(variant, '')}]", fontsize=12)
-    fig.tight_layout()
-    return fig
+    panels = (("vaf", "VAF [%]", "VAF, perturbation level {level}"),
+              ("r2", "R² [-]", "R², perturbation level {level}"))
+    return _level_figure(rows, variant, panels, width=13,
+                         title="Fig. 3: accuracy per condition")
 
 
 def fig4(rows, variant):
     """Band-mean derived coherence of each element over the conditions."""
+    panels = (("coh", "mean coherence [-]",
+               "derived coherence, band mean 0-15 Hz, perturbation level {level}"),)
+    return _level_figure(rows, variant, panels, width=9,
+                         title="Fig. 4: reliability per condition")
+
+
+def _level_figure(rows, variant, panels, *, width, title):
+    """One row per perturbation level, one panel per (row key, y label, panel title)."""
     sel, levels = _by_level(rows, variant)
     n = max(len(levels), 1)
-    fig, axes = plt.subplots(n, 1, figsize=(9, 3.3 * n + 0.8), squeeze=False)
+    fig, axes = plt.subplots(n, len(panels), figsize=(width, 3.3 * n + 0.8), squeeze=False)
     for a, level in enumerate(levels):
         part = [r for r in sel if r["perturbation"] == level]
-        ax = axes[a, 0]
-        x = _condition_axis(ax, part, a == len(levels) - 1)
-        for e in ELEMENTS:
-            ax.plot(x, [r[f"coh_{e}"] for r in part], "o-", ms=4, label=f"Z{e}")
-        ax.set_ylabel("mean coherence [-]")
-        ax.set_title(f"derived coherence, band mean 0-15 Hz, perturbation level {level}",
-                     fontsize=10)
+        for ax, (key, ylabel, panel_title) in zip(axes[a], panels):
+            x = _condition_axis(ax, part, a == len(levels) - 1)
+            for e in ELEMENTS:
+                ax.plot(x, [r[f"{key}_{e}"] for r in part], "o-", ms=4, label=f"Z{e}")
+            ax.set_ylabel(ylabel)
+            ax.set_title(panel_title.format(level=level), fontsize=10)
     if levels:
         axes[0, 0].legend(fontsize=8, ncol=4)
-    fig.suptitle(f"Fig. 4: reliability per condition, {variant} "
-                 f"[{VARIANT_LABELS.get(variant, '')}]", fontsize=12)
+    fig.suptitle(f"{title}, {variant} [{VARIANT_LABELS.get(variant, '')}]", fontsize=12)
     fig.tight_layout()
     return fig
 
