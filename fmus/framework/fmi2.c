@@ -6,14 +6,15 @@
  * unchanged.  A failure of the model itself (refused parameters, non-finite
  * state) returns fmi2Error and moves the instance to the Error state, from
  * which fmi2Reset, fmi2SetFMUstate, fmi2Get* and fmi2FreeInstance are allowed.
+ * The version-neutral work is in core.c.
  */
 #include <math.h>
-#include <stdarg.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "fmi2Functions.h"
 #include "framework.h"
+#include "core.c"
 
 #define ALL_STATES (Instantiated | InitializationMode | StepComplete | StepInProgress | \
                     StepFailed | StepCanceled | Terminated | Error | Fatal)
@@ -39,68 +40,22 @@
 #define MASK_CANCEL_STEP       (StepInProgress)
 #define MASK_GET_STATUS        (StepComplete | StepInProgress | StepFailed | Terminated)
 
-static const char *stateName(ModelState s) {
-    switch (s) {
-    case StartAndEnd: return "StartAndEnd";
-    case Instantiated: return "Instantiated";
-    case InitializationMode: return "InitializationMode";
-    case StepComplete: return "StepComplete";
-    case StepInProgress: return "StepInProgress";
-    case StepFailed: return "StepFailed";
-    case StepCanceled: return "StepCanceled";
-    case Terminated: return "Terminated";
-    case Error: return "Error";
-    case Fatal: return "Fatal";
-    }
-    return "?";
-}
-
-static void vlog(ModelInstance *comp, fmi2Status status, const char *category, const char *fmt, va_list ap) {
-    char buf[1024];
-    if (!comp || !comp->logger) return;
-    vsnprintf(buf, sizeof buf, fmt, ap);
-    comp->logger(comp->componentEnvironment, comp->instanceName, status, category, buf);
-}
-
-void logError(ModelInstance *comp, const char *fmt, ...) {
-    va_list ap;
-    va_start(ap, fmt);
-    vlog(comp, fmi2Error, "logStatusError", fmt, ap);
-    va_end(ap);
-}
-
-void logDebug(ModelInstance *comp, const char *fmt, ...) {
-    va_list ap;
-    if (!comp || !comp->loggingOn) return;
-    va_start(ap, fmt);
-    vlog(comp, fmi2OK, "logCalls", fmt, ap);
-    va_end(ap);
-}
-
-/* Returns 1 when f may be called in the current state, else logs and returns 0. */
-static int allowed(ModelInstance *comp, const char *f, int mask) {
-    if (!comp) return 0;
-    if (comp->s.state & mask) {
-        logDebug(comp, "%s", f);
-        return 1;
-    }
-    logError(comp, "%s must not be called in state %s", f, stateName(comp->s.state));
-    return 0;
-}
-
 #define CHECK(f, mask) do { if (!allowed(comp, f, mask)) return fmi2Error; } while (0)
+#define STATUS(x) ((x) == CORE_OK ? fmi2OK : fmi2Error)
 
-static fmi2Status fail(ModelInstance *comp) {
-    comp->s.state = Error;
-    return fmi2Error;
-}
-
-static void setDefaults(ModelInstance *comp) {
-    Snapshot *s = &comp->s;
-    memset(s, 0, sizeof *s);
-    memcpy(s->r, VR_START, sizeof s->r);
-    s->state = Instantiated;
-    s->valuesDirty = 1;
+/* The FMI 2.0 logger treats its message as a printf format (standard section 2.1.5):
+ * every '%' of the finished text is doubled, so that it prints as itself and text an
+ * importer gave (a GUID, an instance name) can never act as a conversion. */
+static void fmi2Sink(ModelInstance *comp, int isError, const char *category, const char *message) {
+    char buf[2 * 1024 + 1];
+    size_t j = 0;
+    for (const char *p = message; *p && j + 2 < sizeof buf; p++) {
+        if (*p == '%') buf[j++] = '%';
+        buf[j++] = *p;
+    }
+    buf[j] = '\0';
+    ((fmi2CallbackLogger)comp->logger)((fmi2ComponentEnvironment)comp->environment, comp->instanceName,
+                                       isError ? fmi2Error : fmi2OK, category, buf);
 }
 
 /* ---- inquiry ------------------------------------------------------------ */
@@ -126,9 +81,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     (void)fmuResourceLocation; (void)visible;
     memset(&tmp, 0, sizeof tmp);
     tmp.instanceName = (char *)(instanceName ? instanceName : "?");
-    if (functions) {
-        tmp.logger = functions->logger;
-        tmp.componentEnvironment = functions->componentEnvironment;
+    if (functions && functions->logger) {
+        tmp.sink = fmi2Sink;
+        tmp.logger = (void *)functions->logger;
+        tmp.environment = functions->componentEnvironment;
     }
     if (!instanceName || !*instanceName) {
         logError(&tmp, "fmi2Instantiate: missing instance name");
@@ -142,24 +98,14 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         logError(&tmp, "fmi2Instantiate: wrong GUID %s, expected %s", fmuGUID ? fmuGUID : "(null)", INSTANTIATION_TOKEN);
         return NULL;
     }
-    ModelInstance *comp = (ModelInstance *)calloc(1, sizeof(ModelInstance));
-    if (!comp) return NULL;
-    comp->instanceName = (char *)malloc(strlen(instanceName) + 1);
-    if (!comp->instanceName) { free(comp); return NULL; }
-    strcpy(comp->instanceName, instanceName);
-    comp->logger = tmp.logger;
-    comp->componentEnvironment = tmp.componentEnvironment;
-    comp->loggingOn = loggingOn ? 1 : 0;
-    setDefaults(comp);
-    return comp;
+    return core_new(instanceName, tmp.sink, tmp.logger, tmp.environment, loggingOn);
 }
 
 void fmi2FreeInstance(fmi2Component c) {
     ModelInstance *comp = (ModelInstance *)c;
     if (!comp) return;
     if (!allowed(comp, "fmi2FreeInstance", MASK_FREE_INSTANCE)) return;
-    free(comp->instanceName);
-    free(comp);
+    core_free(comp);
 }
 
 /* ---- initialisation, termination, reset --------------------------------- */
@@ -169,13 +115,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     ModelInstance *comp = (ModelInstance *)c;
     (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
     CHECK("fmi2SetupExperiment", MASK_SETUP_EXPERIMENT);
-    if (!isfinite(startTime)) {
-        logError(comp, "fmi2SetupExperiment: startTime = %g is not finite", startTime);
-        return fmi2Error;
-    }
-    comp->s.startTime = startTime;
-    comp->s.time = startTime;
-    return fmi2OK;
+    return STATUS(core_setStartTime(comp, "fmi2SetupExperiment", startTime));
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
@@ -189,12 +129,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     ModelInstance *comp = (ModelInstance *)c;
     CHECK("fmi2ExitInitializationMode", MASK_EXIT_INIT);
-    if (model_initialize(comp)) return fail(comp);
-    comp->s.nSteps = 0;
-    comp->s.time = comp->s.startTime;
-    comp->s.valuesDirty = 1;
-    comp->s.state = StepComplete;
-    return fmi2OK;
+    return STATUS(core_exitInitialization(comp));
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
@@ -213,78 +148,16 @@ fmi2Status fmi2Reset(fmi2Component c) {
 
 /* ---- getting and setting values ------------------------------------------ */
 
-static int checkVRs(ModelInstance *comp, const char *f, const fmi2ValueReference vr[], size_t nvr, int nTotal) {
-    if (nvr > 0 && !vr) {
-        logError(comp, "%s: vr is NULL", f);
-        return 0;
-    }
-    for (size_t i = 0; i < nvr; i++) {
-        if (vr[i] >= (fmi2ValueReference)nTotal) {
-            logError(comp, "%s: unknown value reference %u", f, (unsigned)vr[i]);
-            return 0;
-        }
-    }
-    return 1;
-}
-
-/* Recompute the outputs if they are requested and stale (parameters and inputs
- * are stored values and need no computation). */
-static int updateValues(ModelInstance *comp, const fmi2ValueReference vr[], size_t nvr) {
-    Snapshot *s = &comp->s;
-    size_t i;
-    if (!s->valuesDirty) return 0;
-    for (i = 0; i < nvr; i++)
-        if (VR_CAUSALITY[vr[i]] == CAUS_OUTPUT) break;
-    if (i == nvr) return 0;
-    if (s->state == InitializationMode) {
-        /* parameters may still change: derive them now (the initial state is all zero) */
-        if (model_initialize(comp)) return 1;
-    }
-    model_calculateValues(s);
-    s->valuesDirty = 0;
-    return 0;
-}
-
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
     ModelInstance *comp = (ModelInstance *)c;
     CHECK("fmi2GetReal", MASK_GET);
-    if (!checkVRs(comp, "fmi2GetReal", vr, nvr, N_VR)) return fmi2Error;
-    if (nvr > 0 && !value) { logError(comp, "fmi2GetReal: value is NULL"); return fmi2Error; }
-    if (updateValues(comp, vr, nvr)) return fmi2Error;
-    for (size_t i = 0; i < nvr; i++) value[i] = comp->s.r[vr[i]];
-    return fmi2OK;
+    return STATUS(core_getReals(comp, "fmi2GetReal", vr, nvr, value));
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
     ModelInstance *comp = (ModelInstance *)c;
     CHECK("fmi2SetReal", MASK_SET);
-    if (!checkVRs(comp, "fmi2SetReal", vr, nvr, N_VR)) return fmi2Error;
-    if (nvr > 0 && !value) { logError(comp, "fmi2SetReal: value is NULL"); return fmi2Error; }
-    /* check everything first, so that a refused call changes nothing */
-    for (size_t i = 0; i < nvr; i++) {
-        const char *name = VR_NAME[vr[i]];
-        switch (VR_CAUSALITY[vr[i]]) {
-        case CAUS_OUTPUT:
-            logError(comp, "fmi2SetReal: %s is an output and cannot be set", name);
-            return fmi2Error;
-        case CAUS_PARAMETER:
-            if (!(comp->s.state & MASK_SET_PARAMETER)) {
-                logError(comp, "fmi2SetReal: %s is a fixed parameter and cannot be set in state %s "
-                         "(only before fmi2ExitInitializationMode)", name, stateName(comp->s.state));
-                return fmi2Error;
-            }
-            break;
-        default:
-            break;
-        }
-        if (!isfinite(value[i])) {
-            logError(comp, "fmi2SetReal: %s = %g is not finite", name, value[i]);
-            return fmi2Error;
-        }
-    }
-    for (size_t i = 0; i < nvr; i++) comp->s.r[vr[i]] = value[i];
-    if (nvr > 0) comp->s.valuesDirty = 1;
-    return fmi2OK;
+    return STATUS(core_setReals(comp, "fmi2SetReal", vr, nvr, value, MASK_SET_PARAMETER));
 }
 
 static fmi2Status noVariables(ModelInstance *comp, const char *f, const fmi2ValueReference vr[], size_t nvr) {
@@ -425,40 +298,9 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
     ModelInstance *comp = (ModelInstance *)c;
-    Snapshot *s;
     (void)noSetFMUStatePriorToCurrentPoint;
     CHECK("fmi2DoStep", MASK_DO_STEP);
-    s = &comp->s;
-    const double H = communicationStepSize, h = s->h;
-    if (!isfinite(currentCommunicationPoint) || !isfinite(H) || H <= 0.0) {
-        logError(comp, "fmi2DoStep: communication step size must be finite and > 0, got %.15g "
-                 "(communication point %.15g)", H, currentCommunicationPoint);
-        return fmi2Error;
-    }
-    /* The master's clock must equal ours up to rounding (a tiny fraction of h). */
-    double tol = 1e-9 * fmax(1.0, fabs(s->time));
-    if (tol > 1e-3 * h) tol = 1e-3 * h;
-    if (fabs(currentCommunicationPoint - s->time) > tol) {
-        logError(comp, "fmi2DoStep: expected communication point %.15g but got %.15g", s->time,
-                 currentCommunicationPoint);
-        return fmi2Error;
-    }
-    const double ratio = H / h;
-    const long long n = llround(ratio);
-    if (n < 1 || fabs((double)n * h - H) > 1e-9 * H) {
-        logError(comp, "fmi2DoStep: communication step size %.15g is not a whole multiple of rk4_step = %.15g "
-                 "(ratio %.15g)", H, h, ratio);
-        return fmi2Error;
-    }
-    model_latchInputs(s);
-    int bad = model_advance(s, n);
-    s->valuesDirty = 1;
-    if (bad >= 0) {
-        logError(comp, "fmi2DoStep: state %s became non-finite (%g) in the RK4 step from t = %.15g s to %.15g s; "
-                 "the step is stopped", model_stateName(&s->d, bad), s->x[bad], s->time, s->time + h);
-        return fail(comp);
-    }
-    return fmi2OK;
+    return STATUS(core_doStep(comp, "fmi2DoStep", currentCommunicationPoint, communicationStepSize));
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c) {

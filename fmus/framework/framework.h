@@ -1,20 +1,22 @@
-/* Shared FMI 2.0 Co-Simulation framework: instance, state machine, model interface.
+/* Shared FMI Co-Simulation framework: instance, state machine, model interface.
  *
  * A model provides config.h (identifier, value references via variables.h, the
  * ModelData struct, NX_MAX) and model.c implementing the functions declared at
- * the end of this file.  The framework (fmi2.c) implements every fmi2* entry
- * point with a strict check of the FMI 2.0 allowed-call table, and solver.h the
- * fixed-step classical RK4 integrator (instantiated by the model for its state
- * layouts, so that the equations inline into the integration loop).
+ * the end of this file.  The framework is version-neutral core (core.c: state
+ * machine, logging, values, the time grid) under one thin front end per FMI
+ * version: fmi2.c (FMI 2.0 CS) or fmi3.c (FMI 3.0 CS), chosen at compile time
+ * with FMI_VERSION (2 by default).  solver.h is the fixed-step classical RK4
+ * integrator (instantiated by the model for its state layouts, so that the
+ * equations inline into the integration loop).
  */
 #ifndef FRAMEWORK_H
 #define FRAMEWORK_H
 
 #include <stddef.h>
-#include "fmi2Functions.h"
 #include "config.h"
 
-/* FMI 2.0 Co-Simulation states (bit flags, for allowed-call masks). */
+/* Co-Simulation states (bit flags, for allowed-call masks).  FMI 3.0 Step Mode is
+ * StepComplete; ConfigurationMode is FMI 3.0 only. */
 typedef enum {
     StartAndEnd        = 1 << 0,
     Instantiated       = 1 << 1,
@@ -25,7 +27,8 @@ typedef enum {
     StepCanceled       = 1 << 6,
     Terminated         = 1 << 7,
     Error              = 1 << 8,
-    Fatal              = 1 << 9
+    Fatal              = 1 << 9,
+    ConfigurationMode  = 1 << 10
 } ModelState;
 
 /* Everything that fmi2GetFMUstate / fmi2SetFMUstate copy. */
@@ -33,6 +36,7 @@ typedef struct {
     ModelState state;
     double startTime;
     long long nSteps;      /* internal RK4 steps since startTime */
+    long long nCalls;      /* doStep calls since initialisation (bounds an importer's clock error) */
     double time;           /* = startTime + nSteps * h, never accumulated */
     double h;              /* internal step (rk4_step), fixed at initialisation */
     int valuesDirty;       /* outputs must be recomputed before fmi2GetReal */
@@ -42,15 +46,22 @@ typedef struct {
     ModelData d;           /* derived model constants and flags */
 } Snapshot;
 
-typedef struct {
+typedef struct ModelInstance ModelInstance;
+
+/* Passes one finished message to the importer's logger (set by the FMI front end). */
+typedef void (*LogSink)(ModelInstance *comp, int isError, const char *category, const char *message);
+
+struct ModelInstance {
     char *instanceName;
-    fmi2CallbackLogger logger;
-    fmi2ComponentEnvironment componentEnvironment;
+    LogSink sink;          /* NULL: the importer gave no logger */
+    void *logger;          /* the importer's callback, called by sink only */
+    void *environment;     /* its componentEnvironment / instanceEnvironment */
     int loggingOn;
     Snapshot s;
-} ModelInstance;
+};
 
-/* Logging (fmi2.c).  Messages must not contain a percent sign. */
+/* Logging (core.c).  fmt is the framework's own; the finished text is handed to the
+ * importer as data (see the front ends), so values may contain any character. */
 void logError(ModelInstance *comp, const char *fmt, ...);
 void logDebug(ModelInstance *comp, const char *fmt, ...);
 
