@@ -1,10 +1,13 @@
-"""Build ``fmus/build/ArmExoPlant.fmu`` from the C sources with the system compiler.
+"""Build the plant FMUs from the C sources with the system compiler.
 
-Usage: ``python -m fmus.build [--out-dir DIR] [--cc CC]``.
+Usage: ``python -m fmus.build [--out-dir DIR] [--cc CC] [--fmi-version {2,3,all}]``.
 
-The FMU holds ``modelDescription.xml``, ``binaries/<platform>/ArmExoPlant.<ext>``
-and ``sources/`` (every C file and header needed to rebuild it, including the FMI
-2.0 headers that FMPy ships; compile ``sources/ArmExoPlant_all.c``).
+``fmus/build/ArmExoPlant.fmu`` is FMI 2.0 Co-Simulation, ``fmus/build/ArmExoPlant_fmi3.fmu``
+FMI 3.0 Co-Simulation, both from the same sources (``-DFMI_VERSION=3`` selects the FMI 3.0
+front end) and the one variable table. Each FMU holds ``modelDescription.xml``,
+``binaries/<platform>/ArmExoPlant.<ext>`` and ``sources/`` (every C file and header needed
+to rebuild it, including the FMI headers that FMPy ships; compile
+``sources/ArmExoPlant_all.c``; FMI 3.0 adds ``sources/buildDescription.xml``).
 """
 from __future__ import annotations
 
@@ -26,13 +29,26 @@ MODEL_DIR = PACKAGE_DIR / MODEL_NAME
 FRAMEWORK_DIR = PACKAGE_DIR / "framework"
 BUILD_DIR = PACKAGE_DIR / "build"
 FMU_NAME = f"{MODEL_NAME}.fmu"
+FMU3_NAME = f"{MODEL_NAME}_fmi3.fmu"
 
 #: -O3 without -ffast-math: -ffast-math implies -ffinite-math-only, which lets the
 #: compiler delete the isfinite()/NaN checks that stop a diverging step.
 #: -fno-math-errno only stops libm from setting errno (and lets sin/cos combine).
 CFLAGS = ["-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-fno-math-errno", "-Wall", "-Wextra"]
 
-FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
+               3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
+
+_BUILD_DESCRIPTION = f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiBuildDescription fmiVersion="3.0">
+  <BuildConfiguration modelIdentifier="{MODEL_NAME}">
+    <SourceFileSet language="C99">
+      <SourceFile name="{MODEL_NAME}_all.c"/>
+      <PreprocessorDefinition name="FMI_VERSION" value="3"/>
+    </SourceFileSet>
+  </BuildConfiguration>
+</fmiBuildDescription>
+"""
 
 
 class BuildError(RuntimeError):
@@ -45,18 +61,21 @@ def _fmi_header_dir() -> Path:
     return Path(fmpy.__file__).resolve().parent / "c-code"
 
 
-def _platform() -> tuple[str, str]:
-    system = platform.system()
+def _platform(fmi_version: int = 2) -> tuple[str, str]:
+    """Binary folder and library suffix: FMI 2.0 ``linux64``, FMI 3.0 ``x86_64-linux``."""
+    system, machine = platform.system(), platform.machine().lower()
+    arch = {"amd64": "x86_64", "arm64": "aarch64"}.get(machine, machine)
     if system == "Linux":
-        return "linux64", ".so"
+        return ("linux64" if fmi_version == 2 else f"{arch}-linux"), ".so"
     if system == "Darwin":
-        return "darwin64", ".dylib"
+        return ("darwin64" if fmi_version == 2 else f"{arch}-darwin"), ".dylib"
     raise BuildError(f"unsupported platform {system!r} (build on Linux or macOS)")
 
 
 def source_files() -> list[Path]:
     """Every file the FMU is built from (the C sources and the generators)."""
-    files = sorted(MODEL_DIR.glob("*.c")) + sorted(MODEL_DIR.glob("*.h")) + [MODEL_DIR / "modelDescription.xml"]
+    files = (sorted(MODEL_DIR.glob("*.c")) + sorted(MODEL_DIR.glob("*.h"))
+             + [MODEL_DIR / "modelDescription.xml", MODEL_DIR / "modelDescription3.xml"])
     files += sorted(FRAMEWORK_DIR.glob("*.c")) + sorted(FRAMEWORK_DIR.glob("*.h"))
     files += [PACKAGE_DIR / "variables.py", PACKAGE_DIR / "generate.py", PACKAGE_DIR / "build.py"]
     return files
@@ -67,62 +86,81 @@ def _c_sources() -> list[Path]:
             + sorted(FRAMEWORK_DIR.glob("*.c")) + sorted(FRAMEWORK_DIR.glob("*.h")))
 
 
-def build_fmu(out_dir: str | os.PathLike | None = None, *, cc: str | None = None) -> Path:
+def build_fmu(out_dir: str | os.PathLike | None = None, *, cc: str | None = None,
+              fmi_version: int = 2) -> Path:
     """Generate, compile and package the FMU; return the path of the ``.fmu``.
 
     Parameters
     ----------
     out_dir : path, optional
-        Folder for ``ArmExoPlant.fmu`` (default ``fmus/build/``).
+        Folder for the FMU (default ``fmus/build/``).
     cc : str, optional
         C compiler (default: ``$CC`` or ``cc``).
+    fmi_version : {2, 3}
+        FMI 2.0 (``ArmExoPlant.fmu``) or FMI 3.0 Co-Simulation (``ArmExoPlant_fmi3.fmu``).
+
+    Raises
+    ------
+    BuildError
+        The compiler is missing or failed.
+    ValueError
+        Another FMI version.
     """
+    if fmi_version not in FMI_HEADERS:
+        raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
     out_dir = Path(out_dir) if out_dir is not None else BUILD_DIR
     out_dir.mkdir(parents=True, exist_ok=True)
     cc = cc or os.environ.get("CC", "cc")
-    plat, ext = _platform()
+    plat, ext = _platform(fmi_version)
+    fmu_name = FMU_NAME if fmi_version == 2 else FMU3_NAME
+    description = MODEL_DIR / ("modelDescription.xml" if fmi_version == 2 else "modelDescription3.xml")
     generate.generate()
     with tempfile.TemporaryDirectory(prefix="armexo-build-") as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
         for f in _c_sources():
             shutil.copy2(f, src / f.name)
-        for h in FMI_HEADERS:
+        for h in FMI_HEADERS[fmi_version]:
             shutil.copy2(_fmi_header_dir() / h, src / h)
+        if fmi_version == 3:
+            (src / "buildDescription.xml").write_text(_BUILD_DESCRIPTION)
         lib = Path(tmp) / f"{MODEL_NAME}{ext}"
-        cmd = [cc, *CFLAGS, "-I", str(src), "-o", str(lib), str(src / f"{MODEL_NAME}_all.c"), "-lm"]
+        cmd = [cc, *CFLAGS, f"-DFMI_VERSION={fmi_version}", "-I", str(src), "-o", str(lib),
+               str(src / f"{MODEL_NAME}_all.c"), "-lm"]
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True)
         except FileNotFoundError as exc:
             raise BuildError(f"C compiler {cc!r} not found; install a C compiler or set CC") from exc
         if proc.returncode != 0:
             raise BuildError(f"compiling the FMU failed ({' '.join(cmd)}):\n{proc.stderr}")
-        tmp_fmu = out_dir / f".{FMU_NAME}.{os.getpid()}.tmp"
+        tmp_fmu = out_dir / f".{fmu_name}.{os.getpid()}.tmp"
         with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
-            z.write(MODEL_DIR / "modelDescription.xml", "modelDescription.xml")
+            z.write(description, "modelDescription.xml")
             z.write(lib, f"binaries/{plat}/{MODEL_NAME}{ext}")
             for f in sorted(src.iterdir()):
                 z.write(f, f"sources/{f.name}")
             z.write(MODEL_DIR / "readme.md", "documentation/readme.md")
-        os.replace(tmp_fmu, out_dir / FMU_NAME)  # atomic: readers never see half an FMU
-    return out_dir / FMU_NAME
+        os.replace(tmp_fmu, out_dir / fmu_name)  # atomic: readers never see half an FMU
+    return out_dir / fmu_name
 
 
-def default_fmu_path(build_if_missing: bool = True) -> Path:
-    """Path of ``fmus/build/ArmExoPlant.fmu``, (re)built if missing or older than a source.
+def default_fmu_path(build_if_missing: bool = True, *, fmi_version: int = 2) -> Path:
+    """Path of ``fmus/build/ArmExoPlant.fmu`` (FMI 2.0) or ``ArmExoPlant_fmi3.fmu`` (FMI 3.0),
+    (re)built if missing or older than a source.
 
     Parameters
     ----------
     build_if_missing : bool
         If False, only return the path (raise FileNotFoundError when it is missing).
+    fmi_version : {2, 3}
     """
-    path = BUILD_DIR / FMU_NAME
+    path = BUILD_DIR / (FMU_NAME if fmi_version == 2 else FMU3_NAME)
     if not build_if_missing:
         if not path.exists():
             raise FileNotFoundError(f"{path} not built: run `python -m fmus.build`")
         return path
     if not path.exists() or max(f.stat().st_mtime for f in source_files()) > path.stat().st_mtime:
-        return build_fmu()
+        return build_fmu(fmi_version=fmi_version)
     return path
 
 
@@ -130,13 +168,16 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m fmus.build", description=__doc__.splitlines()[0])
     parser.add_argument("--out-dir", default=None, help="output folder (default fmus/build/)")
     parser.add_argument("--cc", default=None, help="C compiler (default $CC or cc)")
+    parser.add_argument("--fmi-version", choices=("2", "3", "all"), default="all",
+                        help="FMI 2.0, FMI 3.0 or both (default both)")
     args = parser.parse_args(argv)
+    versions = (2, 3) if args.fmi_version == "all" else (int(args.fmi_version),)
     try:
-        path = build_fmu(args.out_dir, cc=args.cc)
+        for version in versions:
+            print(build_fmu(args.out_dir, cc=args.cc, fmi_version=version))
     except BuildError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    print(path)
     return 0
 
 

@@ -1,8 +1,10 @@
-"""Generate the C variable header and modelDescription.xml from :mod:`fmus.variables`.
+"""Generate the C variable header and the model descriptions from :mod:`fmus.variables`.
 
-``python -m fmus.generate`` rewrites ``fmus/ArmExoPlant/variables.h`` and
-``fmus/ArmExoPlant/modelDescription.xml`` (only when their content changed);
-:func:`fmus.build.build_fmu` calls it before compiling.
+``python -m fmus.generate`` rewrites ``fmus/ArmExoPlant/variables.h``,
+``fmus/ArmExoPlant/modelDescription.xml`` (FMI 2.0) and
+``fmus/ArmExoPlant/modelDescription3.xml`` (FMI 3.0; only when their content changed);
+:func:`fmus.build.build_fmu` calls it before compiling. Both descriptions come from the
+one table: same names, value references, units, starts and bounds.
 """
 from __future__ import annotations
 
@@ -51,8 +53,31 @@ def header_text() -> str:
     return "\n".join(lines)
 
 
-def model_description_text() -> str:
-    """Content of ``modelDescription.xml`` (FMI 2.0 Co-Simulation)."""
+_DESCRIPTION = ("2-DOF planar exoskeleton coupled to a linear human arm impedance, LuGre joint "
+                "friction and optional unmodelled effects; fixed-step RK4")
+_LOG_CATEGORIES = [
+    "  <LogCategories>",
+    '    <Category name="logStatusError" description="Errors: refused calls, bad parameters, non-finite states"/>',
+    '    <Category name="logStatusWarning" description="Warnings"/>',
+    '    <Category name="logCalls" description="Every FMI call (debug logging)"/>',
+    "  </LogCategories>",
+]
+
+
+def _unit_definitions() -> list:
+    out = ["  <UnitDefinitions>"]
+    for unit, exps in V.UNITS.items():
+        attrs = " ".join(f'{k}="{v}"' for k, v in exps.items())
+        out.append(f'    <Unit name="{escape(unit)}"><BaseUnit {attrs}/></Unit>')
+    return out + ["  </UnitDefinitions>"]
+
+
+def model_description_text(fmi_version: int = 2) -> str:
+    """Content of ``modelDescription.xml``: FMI 2.0 (default) or 3.0 Co-Simulation."""
+    if fmi_version == 3:
+        return _model_description_fmi3()
+    if fmi_version != 2:
+        raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
     out = [
         '<?xml version="1.0" encoding="UTF-8"?>',
         "<fmiModelDescription",
@@ -79,11 +104,7 @@ def model_description_text() -> str:
     out += [
         "  </UnitDefinitions>",
         "",
-        "  <LogCategories>",
-        '    <Category name="logStatusError" description="Errors: refused calls, bad parameters, non-finite states"/>',
-        '    <Category name="logStatusWarning" description="Warnings"/>',
-        '    <Category name="logCalls" description="Every FMI call (debug logging)"/>',
-        "  </LogCategories>",
+        *_LOG_CATEGORIES,
         "",
         '  <DefaultExperiment startTime="0" stopTime="2" stepSize="0.001"/>',
         "",
@@ -114,6 +135,54 @@ def model_description_text() -> str:
     return "\n".join(out)
 
 
+def _model_description_fmi3() -> str:
+    """FMI 3.0 Co-Simulation: Float64 variables with the table's value references, plus the
+    independent variable ``time`` (value reference len(VARIABLES), read by fmi3GetFloat64)."""
+    out = [
+        '<?xml version="1.0" encoding="UTF-8"?>',
+        "<fmiModelDescription",
+        '  fmiVersion="3.0"',
+        f'  modelName="{V.MODEL_NAME}"',
+        f'  instantiationToken="{V.GUID}"',
+        f'  description="{_DESCRIPTION}"',
+        '  generationTool="fmus/generate.py"',
+        '  variableNamingConvention="structured">',
+        "",
+        f'  <CoSimulation modelIdentifier="{V.MODEL_NAME}" canHandleVariableCommunicationStepSize="true"'
+        ' canGetAndSetFMUState="true" canSerializeFMUState="false" hasEventMode="false"'
+        ' canReturnEarlyAfterIntermediateUpdate="false"/>',
+        "",
+        *_unit_definitions(),
+        "",
+        *_LOG_CATEGORIES,
+        "",
+        '  <DefaultExperiment startTime="0" stopTime="2" stepSize="0.001"/>',
+        "",
+        "  <ModelVariables>",
+        f'    <Float64 name="time" valueReference="{len(V.VARIABLES)}" causality="independent" '
+        'variability="continuous" unit="s" description="Simulation time"/>',
+    ]
+    for i, var in enumerate(V.VARIABLES):
+        attrs = [f'name="{escape(var.name)}"', f'valueReference="{i}"', f'causality="{var.causality}"',
+                 f'variability="{var.variability}"']
+        if var.causality == "parameter":
+            attrs.append('initial="exact"')
+        if var.start is not None:
+            attrs.append(f'start="{_fmt(var.start)}"')
+        if var.unit:
+            attrs.append(f'unit="{escape(var.unit)}"')
+        if var.min is not None:
+            attrs.append(f'min="{_fmt(var.min)}"')
+        attrs.append(f'description="{escape(var.description)}"')
+        out.append(f'    <Float64 {" ".join(attrs)}/>')
+    out += ["  </ModelVariables>", "", "  <ModelStructure>"]
+    vrs = [i for i, var in enumerate(V.VARIABLES) if var.causality == "output"]
+    out += [f'    <Output valueReference="{k}"/>' for k in vrs]
+    out += [f'    <InitialUnknown valueReference="{k}"/>' for k in vrs]
+    out += ["  </ModelStructure>", "", "</fmiModelDescription>", ""]
+    return "\n".join(out)
+
+
 def _write_if_changed(path: Path, text: str) -> bool:
     if path.exists() and path.read_text() == text:
         return False
@@ -124,7 +193,8 @@ def _write_if_changed(path: Path, text: str) -> bool:
 def generate(model_dir: Path = MODEL_DIR) -> list[Path]:
     """Write ``variables.h`` and ``modelDescription.xml``; return the files that changed."""
     changed = []
-    for name, text in (("variables.h", header_text()), ("modelDescription.xml", model_description_text())):
+    for name, text in (("variables.h", header_text()), ("modelDescription.xml", model_description_text()),
+                       ("modelDescription3.xml", model_description_text(3))):
         path = Path(model_dir) / name
         if _write_if_changed(path, text):
             changed.append(path)

@@ -73,3 +73,9 @@ def make_slave(model_description, unzipdir):
 def slave(make_slave):
     s, _ = make_slave()
     return s
+
+
+@pytest.fixture(scope="session")
+def fmu3_path(tmp_path_factory):
+    """The FMI 3.0 ArmExoPlant FMU (same sources), built once per session."""
+    return fmus.build_fmu(tmp_path_factory.mktemp("fmu3"), fmi_version=3)

@@ -10,9 +10,10 @@ from fmus import variables as V
 
 
 def test_generated_files_are_up_to_date():
-    """variables.h and modelDescription.xml in the repository equal the generator's output."""
+    """variables.h and both model descriptions in the repository equal the generator's output."""
     assert (generate.MODEL_DIR / "variables.h").read_text() == generate.header_text()
     assert (generate.MODEL_DIR / "modelDescription.xml").read_text() == generate.model_description_text()
+    assert (generate.MODEL_DIR / "modelDescription3.xml").read_text() == generate.model_description_text(3)
 
 
 def test_xml_matches_python_table(model_description):
