@@ -22,7 +22,7 @@ import zipfile
 from pathlib import Path
 
 from . import generate
-from .variables import MODEL_NAME
+from .variables import MODEL_NAME, N_LINKS, model_name
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 MODEL_DIR = PACKAGE_DIR / MODEL_NAME
@@ -75,7 +75,8 @@ def _platform(fmi_version: int = 2) -> tuple[str, str]:
 def source_files() -> list[Path]:
     """Every file the FMU is built from (the C sources and the generators)."""
     files = (sorted(MODEL_DIR.glob("*.c")) + sorted(MODEL_DIR.glob("*.h"))
-             + [MODEL_DIR / "modelDescription.xml", MODEL_DIR / "modelDescription3.xml"])
+             + [MODEL_DIR / "modelDescription.xml", MODEL_DIR / "modelDescription3.xml"]
+             + sorted(MODEL_DIR.glob("modelDescription.n*.xml")))
     files += sorted(FRAMEWORK_DIR.glob("*.c")) + sorted(FRAMEWORK_DIR.glob("*.h"))
     files += [PACKAGE_DIR / "variables.py", PACKAGE_DIR / "generate.py", PACKAGE_DIR / "build.py"]
     return files
@@ -86,8 +87,15 @@ def _c_sources() -> list[Path]:
             + sorted(FRAMEWORK_DIR.glob("*.c")) + sorted(FRAMEWORK_DIR.glob("*.h")))
 
 
+def fmu_name(fmi_version: int = 2, n: int = 2) -> str:
+    """File name of the FMU: ``ArmExoPlant.fmu``, ``ArmExoPlant_fmi3.fmu``, ``ArmExoPlant3.fmu``."""
+    if n == 2:
+        return FMU_NAME if fmi_version == 2 else FMU3_NAME
+    return f"{model_name(n)}.fmu"
+
+
 def build_fmu(out_dir: str | os.PathLike | None = None, *, cc: str | None = None,
-              fmi_version: int = 2) -> Path:
+              fmi_version: int = 2, n: int = 2) -> Path:
     """Generate, compile and package the FMU; return the path of the ``.fmu``.
 
     Parameters
@@ -98,6 +106,9 @@ def build_fmu(out_dir: str | os.PathLike | None = None, *, cc: str | None = None
         C compiler (default: ``$CC`` or ``cc``).
     fmi_version : {2, 3}
         FMI 2.0 (``ArmExoPlant.fmu``) or FMI 3.0 Co-Simulation (``ArmExoPlant_fmi3.fmu``).
+    n : int
+        Number of planar links (``fmus.variables.N_LINKS``); n != 2 builds FMI 2.0
+        ``ArmExoPlant{n}.fmu`` from the same sources with ``N_JOINTS = n``.
 
     Raises
     ------
@@ -108,12 +119,17 @@ def build_fmu(out_dir: str | os.PathLike | None = None, *, cc: str | None = None
     """
     if fmi_version not in FMI_HEADERS:
         raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
+    if n not in N_LINKS or (n != 2 and fmi_version != 2):
+        raise ValueError(f"the C plant is built for n in {N_LINKS} (FMI 3.0 for n = 2 only), "
+                         f"got n={n!r}, fmi_version={fmi_version!r}")
     out_dir = Path(out_dir) if out_dir is not None else BUILD_DIR
     out_dir.mkdir(parents=True, exist_ok=True)
     cc = cc or os.environ.get("CC", "cc")
     plat, ext = _platform(fmi_version)
-    fmu_name = FMU_NAME if fmi_version == 2 else FMU3_NAME
+    name, identifier = fmu_name(fmi_version, n), model_name(n)
     description = MODEL_DIR / ("modelDescription.xml" if fmi_version == 2 else "modelDescription3.xml")
+    if n != 2:
+        description = MODEL_DIR / f"modelDescription.n{n}.xml"
     generate.generate()
     with tempfile.TemporaryDirectory(prefix="armexo-build-") as tmp:
         src = Path(tmp) / "sources"
@@ -124,27 +140,31 @@ def build_fmu(out_dir: str | os.PathLike | None = None, *, cc: str | None = None
             shutil.copy2(_fmi_header_dir() / h, src / h)
         if fmi_version == 3:
             (src / "buildDescription.xml").write_text(_BUILD_DESCRIPTION)
-        lib = Path(tmp) / f"{MODEL_NAME}{ext}"
+        if n != 2:  # the source file the model description names
+            (src / f"{identifier}_all.c").write_text(
+                f"/* The {n}-link plant: ArmExoPlant_all.c with N_JOINTS = {n}. */\n"
+                f"#define N_JOINTS {n}\n#include \"{MODEL_NAME}_all.c\"\n")
+        lib = Path(tmp) / f"{identifier}{ext}"
         cmd = [cc, *CFLAGS, f"-DFMI_VERSION={fmi_version}", "-I", str(src), "-o", str(lib),
-               str(src / f"{MODEL_NAME}_all.c"), "-lm"]
+               str(src / f"{identifier}_all.c"), "-lm"]
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True)
         except FileNotFoundError as exc:
             raise BuildError(f"C compiler {cc!r} not found; install a C compiler or set CC") from exc
         if proc.returncode != 0:
             raise BuildError(f"compiling the FMU failed ({' '.join(cmd)}):\n{proc.stderr}")
-        tmp_fmu = out_dir / f".{fmu_name}.{os.getpid()}.tmp"
+        tmp_fmu = out_dir / f".{name}.{os.getpid()}.tmp"
         with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
             z.write(description, "modelDescription.xml")
-            z.write(lib, f"binaries/{plat}/{MODEL_NAME}{ext}")
+            z.write(lib, f"binaries/{plat}/{identifier}{ext}")
             for f in sorted(src.iterdir()):
                 z.write(f, f"sources/{f.name}")
             z.write(MODEL_DIR / "readme.md", "documentation/readme.md")
-        os.replace(tmp_fmu, out_dir / fmu_name)  # atomic: readers never see half an FMU
-    return out_dir / fmu_name
+        os.replace(tmp_fmu, out_dir / name)  # atomic: readers never see half an FMU
+    return out_dir / name
 
 
-def default_fmu_path(build_if_missing: bool = True, *, fmi_version: int = 2) -> Path:
+def default_fmu_path(build_if_missing: bool = True, *, fmi_version: int = 2, n: int = 2) -> Path:
     """Path of ``fmus/build/ArmExoPlant.fmu`` (FMI 2.0) or ``ArmExoPlant_fmi3.fmu`` (FMI 3.0),
     (re)built if missing or older than a source.
 
@@ -153,14 +173,16 @@ def default_fmu_path(build_if_missing: bool = True, *, fmi_version: int = 2) -> 
     build_if_missing : bool
         If False, only return the path (raise FileNotFoundError when it is missing).
     fmi_version : {2, 3}
+    n : int
+        Number of links (``ArmExoPlant3.fmu`` for 3).
     """
-    path = BUILD_DIR / (FMU_NAME if fmi_version == 2 else FMU3_NAME)
+    path = BUILD_DIR / fmu_name(fmi_version, n)
     if not build_if_missing:
         if not path.exists():
             raise FileNotFoundError(f"{path} not built: run `python -m fmus.build`")
         return path
     if not path.exists() or max(f.stat().st_mtime for f in source_files()) > path.stat().st_mtime:
-        return build_fmu(fmi_version=fmi_version)
+        return build_fmu(fmi_version=fmi_version, n=n)
     return path
 
 
@@ -175,6 +197,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         for version in versions:
             print(build_fmu(args.out_dir, cc=args.cc, fmi_version=version))
+        if 2 in versions:  # the n-link plants (FMI 2.0)
+            for n in N_LINKS:
+                if n != 2:
+                    print(build_fmu(args.out_dir, cc=args.cc, fmi_version=2, n=n))
     except BuildError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
