@@ -1,0 +1,99 @@
+within ArmExo;
+model ArmExoPlant3 "3-DOF exoskeleton (shoulder, elbow, wrist) + linear human arm + LuGre friction + plant-side effects"
+  extends ArmExo.Interfaces.PartialPlant(final n = 3);
+  parameter ArmExo.Units.Angle_deg posture_deg[3] = {62.708, 77.260, 10.0} "Posture theta0 (shoulder, elbow, wrist)";
+
+  ArmExo.Components.LinearArmImpedance arm(final n = 3,
+    M_h = [0.187, 0.084, 0.012; 0.079, 0.060, 0.010; 0.012, 0.010, 0.006],
+    B_h = [0.651, 0.239, 0.020; 0.236, 0.407, 0.030; 0.020, 0.030, 0.060],
+    K_h = [7.967, 3.187, 0.300; 1.663, 6.901, 0.600; 0.300, 0.600, 3.000]) "Human arm (reference-3dof.md)";
+  ArmExo.Components.PlanarExoskeleton3DOF robot(
+    q0 = posture_deg*(3.141592653589793/180),
+    scale = inertia_mismatch.scale,
+    beta = gravity.beta,
+    Jm_on_link = if transmission_compliance.on then {0, 0, 0} else {1, 1, 1}) "Exoskeleton links";
+  ArmExo.Components.LuGreFriction friction(final n = 3) "Joint friction (motor side with a compliant transmission)";
+  ArmExo.Effects.FirstOrderLag actuator_lag(final n = 3) "tau_m -> tau_act";
+  ArmExo.Effects.TransmissionCompliance transmission_compliance(final n = 3) "Motor -> link";
+  ArmExo.Effects.InterfaceCompliance interface_compliance(final n = 3) "Link -> arm (cuff)";
+  ArmExo.Effects.Gravity gravity "Tilt of the plane";
+  ArmExo.Effects.InertiaMismatch inertia_mismatch "Scale of a1, a2, a3";
+  ArmExo.Effects.FirstOrderLag torque_sensor_lag(final n = 3) "tau_h at the cuff -> sensor reading";
+
+  ArmExo.Units.Angle theta_link[3](each start = 0, each fixed = true) "Link angles (deviation)";
+  ArmExo.Units.AngularVelocity w_link[3](each start = 0, each fixed = true) "Link velocities";
+  ArmExo.Units.Angle theta_mot[3](each start = 0, each fixed = true) "Motor angles (transmission compliance only)";
+  ArmExo.Units.AngularVelocity w_mot[3](each start = 0, each fixed = true) "Motor velocities (transmission compliance only)";
+  ArmExo.Units.Angle theta_arm[3](each start = 0, each fixed = true) "Arm angles (interface compliance only)";
+  ArmExo.Units.AngularVelocity w_arm[3](each start = 0, each fixed = true) "Arm velocities (interface compliance only)";
+  ArmExo.Units.Torque tau_act[3] "Torque applied by the actuators";
+  ArmExo.Units.Torque tau_link[3] "Joint torque acting on the links";
+  ArmExo.Units.Torque tau_cuff[3] "Torque robot -> arm at the cuff (before the sensor lag)";
+equation
+  // actuator
+  actuator_lag.u = tau_m;
+  tau_act = actuator_lag.y;
+  // transmission: rigid (friction on the link) or compliant (friction and encoder on the motor)
+  transmission_compliance.phi_a = theta_mot;
+  transmission_compliance.w_a = w_mot;
+  transmission_compliance.phi_b = theta_link;
+  transmission_compliance.w_b = w_link;
+  if transmission_compliance.on then
+    der(theta_mot) = w_mot;
+    robot.Jm .* der(w_mot) = tau_act - friction.tau_f - transmission_compliance.tau;
+    friction.w = w_mot;
+    tau_link = transmission_compliance.tau;
+    theta = theta_mot;
+    omega = w_mot;
+  else
+    der(theta_mot) = zeros(3);
+    der(w_mot) = zeros(3);
+    friction.w = w_link;
+    tau_link = tau_act - friction.tau_f;
+    theta = theta_link;
+    omega = w_link;
+  end if;
+  // links
+  robot.theta = theta_link;
+  robot.w = w_link;
+  der(theta_link) = w_link;
+  robot.M*der(w_link) + robot.c + robot.G = tau_link - tau_cuff;
+  // cuff: rigid (the arm moves with the link) or compliant (the arm has its own states)
+  interface_compliance.phi_a = theta_link;
+  interface_compliance.w_a = w_link;
+  interface_compliance.phi_b = theta_arm;
+  interface_compliance.w_b = w_arm;
+  if interface_compliance.on then
+    der(theta_arm) = w_arm;
+    arm.theta = theta_arm;
+    arm.w = w_arm;
+    arm.a = der(w_arm);
+    arm.tau = interface_compliance.tau;
+    tau_cuff = interface_compliance.tau;
+  else
+    der(theta_arm) = zeros(3);
+    der(w_arm) = zeros(3);
+    arm.theta = theta_link;
+    arm.w = w_link;
+    arm.a = der(w_link);
+    tau_cuff = arm.tau;
+  end if;
+  // torque sensor
+  torque_sensor_lag.u = tau_cuff;
+  tau_h = torque_sensor_lag.y;
+  annotation (Documentation(info = "<html>
+<p>The three-link plant of docs/spec/reference-3dof.md (ArmExoPlant with a wrist; the C FMU
+ArmExoPlant3 has the same parameter names). Nominal
+(rigid transmission and cuff):</p>
+<pre>
+  (M_r(q) + M_h) theta'' = tau_act - tau_f(theta') - c_r - G - B_h theta' - K_h theta
+  tau_h = M_h theta'' + B_h theta' + K_h theta
+</pre>
+<p>q = theta0 + theta. Effects, each off by default: <code>actuator_lag</code>,
+<code>transmission_compliance</code>, <code>interface_compliance</code>, <code>gravity</code>,
+<code>inertia_mismatch</code>, <code>torque_sensor_lag</code>; they combine. Initial state: all
+zero (posture, at rest, z = 0, tau_act = 0, motor aligned). The parameter names equal those
+of the C FMU (fmus/variables.py), except that the C FMU also has <code>rk4_step</code>, and the
+robot parameters are <code>robot.*</code> in both.</p>
+</html>"));
+end ArmExoPlant3;
