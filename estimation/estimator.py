@@ -218,7 +218,7 @@ def _pooled(trials, fs, options, x_of, y_of, leak_of=None):
     Returns ``(f, Gxx (nf, p, p), Gxy (nf, p, q), Gyy_diag (nf, q), G1, G2, n_segments)``,
     G1 and G2 the window-derivative cross-spectra of x with ``leak_of(trial)`` (or None).
     """
-    total, acc = 0, None
+    total, acc, nan_shape = 0, None, None
     for trial in trials:
         x, y = x_of(trial), y_of(trial)
         kw = dict(fs=fs, **options.__dict__)
@@ -227,11 +227,10 @@ def _pooled(trials, fs, options, x_of, y_of, leak_of=None):
         _, gyy = spectral.auto_spectrum(y, **kw)
         w = options.n_segments(x.shape[0])
         parts = [w * gxx, w * gxy, w * gyy]
+        if leak_of is not None and (options.window != "hann" or options.detrend != "constant"):
+            nan_shape = gxy.shape[:2] + (leak_of(trial).shape[1],)
+            leak_of = None  # the leakage model is that of a Hann window: P1, P2 left NaN
         if leak_of is not None:
-            if options.window != "hann" or options.detrend != "constant":
-                raise EstimationError("the window-leakage spectra need window='hann' and "
-                                      f"detrend='constant', got {options.window!r}, "
-                                      f"{options.detrend!r}")
             _, _, g1, g2 = spectral.window_derivative_spectra(
                 x, leak_of(trial), fs=fs, nperseg=options.nperseg,
                 noverlap=options.noverlap, nfft=options.nfft)
@@ -239,7 +238,12 @@ def _pooled(trials, fs, options, x_of, y_of, leak_of=None):
         acc = parts if acc is None else [a + p for a, p in zip(acc, parts)]
         total += w
     acc = [a / total for a in acc]
-    g1, g2 = acc[3:] if leak_of is not None else (None, None)
+    if leak_of is not None:
+        g1, g2 = acc[3:]
+    elif nan_shape is not None:
+        g1 = g2 = np.full(nan_shape, np.nan, complex)
+    else:
+        g1 = g2 = None
     return (f, *acc[:3], g1, g2, total)
 
 

@@ -138,8 +138,10 @@ def run_closed_loop(io, controller, sampler, tau_delta, recorder, *, control_per
     interval), sample them, compute tau_m[n], record, and hold the (possibly delayed)
     command over ``n_decimation`` communication steps of ``Ts / n_decimation``.
 
-    The FMI calls are made here directly on the ctypes prototypes of ``io`` (a method
-    call per FMI call would cost a tenth of the controller budget).
+    The FMI calls are made here directly on the pre-bound ctypes functions of ``io`` (a
+    method call per FMI call would cost a tenth of the controller budget); they are the same
+    for FMI 2.0 and 3.0 plants. A plant in other units than the contract's is converted on
+    the way (``io.output_converter``, ``io.input_converter``; nothing is added otherwise).
 
     Parameters
     ----------
@@ -167,28 +169,28 @@ def run_closed_loop(io, controller, sampler, tau_delta, recorder, *, control_per
         An FMI call returned a status above Warning.
     """
     h = control_period / n_decimation
-    set_real, get_real, do_step = io.set_real, io.get_real, io.do_step_raw
-    comp, vr_in, n_in, val_in = io.component, io.vr_in, io.n_in, io.val_in
-    vr_out, n_out, val_out = io.vr_out, io.n_out, io.val_out
-    sample, control, record = sampler.sample, controller.step, recorder.record
-    push = None if delay is None else delay.push
+    read, write, step, names = io.read, io.write, io.step, io.names
+    val_in, val_out = io.val_in, io.val_out
+    sample = io.output_converter(sampler.sample)
+    control, record = controller.step, recorder.record
+    push = io.input_converter(None if delay is None else delay.push)
     n = 0
     try:
         for n, d in enumerate(tau_delta):
-            if get_real(comp, vr_out, n_out, val_out) > 1:
-                raise FMUCallError(f"fmi2GetReal failed at t={t0 + n * control_period!r} s")
+            if read() > 1:
+                raise FMUCallError(f"{names[0]} failed at t={t0 + n * control_period!r} s")
             measured = sample(n, val_out[:])
             tau_m = control(measured, d)
             record(measured, tau_m)
             val_in[:] = tau_m if push is None else push(tau_m)
-            if set_real(comp, vr_in, n_in, val_in) > 1:
-                raise FMUCallError(f"fmi2SetReal failed at t={t0 + n * control_period!r} s")
+            if write() > 1:
+                raise FMUCallError(f"{names[1]} failed at t={t0 + n * control_period!r} s")
             k = n * n_decimation
             for i in range(n_decimation):
                 t = t0 + (k + i) * h
-                status = do_step(comp, t, h, 1)
+                status = step(t, h, 1)
                 if status > 1:
-                    raise step_error(status, t, h)
+                    raise step_error(status, t, h, names[2])
     except DivergenceError as exc:
         raise divergence(condition, n, control_period, t0, str(exc)) from None
 
@@ -196,27 +198,29 @@ def run_closed_loop(io, controller, sampler, tau_delta, recorder, *, control_per
 def run_open_loop(io, tau_applied, recorder, *, control_period, n_decimation=1, t0=0.0):
     """Step the plant under a given torque history (no controller): the plant-alone cost.
 
-    Records the plant outputs of each sample (state before the sample's torque acts).
+    Records the plant outputs of each sample (state before the sample's torque acts), in SI
+    units.
     Same FMI call pattern as :func:`run_closed_loop`.
     """
     h = control_period / n_decimation
-    set_real, get_real, do_step = io.set_real, io.get_real, io.do_step_raw
-    comp, vr_in, n_in, val_in = io.component, io.vr_in, io.n_in, io.val_in
-    vr_out, n_out, val_out = io.vr_out, io.n_out, io.val_out
+    read, write, step, names = io.read, io.write, io.step, io.names
+    val_in, val_out = io.val_in, io.val_out
+    to_si = io.output_converter(lambda n, outputs: outputs)
+    to_plant = io.input_converter(None)
     record = recorder.record
     for n, tau in enumerate(tau_applied):
-        if get_real(comp, vr_out, n_out, val_out) > 1:
-            raise FMUCallError(f"fmi2GetReal failed at t={t0 + n * control_period!r} s")
-        record(val_out[:])
-        val_in[:] = tau
-        if set_real(comp, vr_in, n_in, val_in) > 1:
-            raise FMUCallError(f"fmi2SetReal failed at t={t0 + n * control_period!r} s")
+        if read() > 1:
+            raise FMUCallError(f"{names[0]} failed at t={t0 + n * control_period!r} s")
+        record(to_si(n, val_out[:]))
+        val_in[:] = tau if to_plant is None else to_plant(tau)
+        if write() > 1:
+            raise FMUCallError(f"{names[1]} failed at t={t0 + n * control_period!r} s")
         k = n * n_decimation
         for i in range(n_decimation):
             t = t0 + (k + i) * h
-            status = do_step(comp, t, h, 1)
+            status = step(t, h, 1)
             if status > 1:
-                raise step_error(status, t, h)
+                raise step_error(status, t, h, names[2])
 
 
 def divergence(condition, n, control_period, t0, what) -> DivergenceError:

@@ -14,8 +14,7 @@ from trialformat import reference as ref
 from .controller import IMBIC
 from .effects import parse_effects
 from .errors import SetupError
-from .master import (DelayLine, Recorder, Sampler, check_angles, decimation, run_closed_loop,
-                     run_open_loop)
+from .master import DelayLine, Recorder, Sampler, check_angles, run_closed_loop, run_open_loop
 from .perturbation import make_perturbation
 from .plant import Plant
 
@@ -102,7 +101,7 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
     plant = _resolve_plant(plant)
     if plant.n_dof != n:
         raise SetupError(f"plant {plant.path.name} has {plant.n_dof} joints, the set-up {n}")
-    n_dec = decimation(ts, communication_step_s)
+    n_dec = plant.decimation(ts, communication_step_s)
     required = dict(hidden.plant_parameters)
     required.update(parameters or {})
     absent = plant.start(required, optional=setup.plant_parameters())
@@ -224,7 +223,7 @@ def simulate_plant(setup, tau_applied, *, plant=None, effects=None, parameters=N
     recorder = Recorder(("outputs",))
     run_open_loop(plant.io, np.asarray(tau_applied, dtype=float).tolist(), recorder,
                   control_period=setup.Ts,
-                  n_decimation=decimation(setup.Ts, communication_step_s))
+                  n_decimation=plant.decimation(setup.Ts, communication_step_s))
     out = recorder.arrays()["outputs"]
     n = setup.n_dof
     return {"theta": out[:, :n], "tau_h": out[:, n:2 * n]}
