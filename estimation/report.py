@@ -43,6 +43,21 @@ from .io import read_trials  # noqa: E402
 ELEMENTS = ("11", "12", "21", "22")
 
 
+def _elements(n) -> tuple:
+    """Element labels "ik" of an n x n impedance (ELEMENTS for two joints)."""
+    return tuple(f"{i}{k}" for i in range(1, n + 1) for k in range(1, n + 1))
+
+
+def _elements_of(row) -> tuple:
+    """The element labels a scored row has (its n x n elements)."""
+    n = sum(1 for key in row if key.startswith("vaf_") and key[4:].isdigit() and key[4] == key[5])
+    return _elements(n)
+
+
+#: Truth of a report by name: Table I (reference.md) or reference-3dof.md's arm.
+_TRUTH_ARMS = {"table1": "2dof", "reference-3dof": "3dof"}
+
+
 def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PAPER,
                 progress=True) -> dict:
     """Score every condition of the trials in ``folders`` and write figures and tables.
@@ -54,9 +69,9 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
         all-joints trials for the MIMO baselines; grouped by metadata, not by folder.
     out : path
         Report folder (created).
-    truth : {"table1", "none"}
-        Compare with Table I (simulated trials), or, for lab data, with each estimate's
-        own second-order fit.
+    truth : {"table1", "reference-3dof", "none"}
+        Compare with Table I or reference-3dof.md's arm (simulated trials), or, for lab
+        data, with each estimate's own second-order fit.
     variant : str
         Main variant (estimation.conditions.VARIANTS): drawn solid in Fig. 2, and in
         ``fig3_accuracy.png`` / ``fig4_coherence.png``. Default: the recommended
@@ -77,7 +92,7 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
         variant_spec(name)  # unknown names fail before any work
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    arm = ref.arm_matrices() if truth == "table1" else None
+    arm = ref.arm_matrices(_TRUTH_ARMS[truth]) if truth in _TRUTH_ARMS else None
     folders = [folders] if isinstance(folders, (str, os.PathLike)) else list(folders)
     paths = [p for folder in folders for p in
              sorted(Path(folder).glob("*.csv")) + sorted(Path(folder).glob("*.mat"))]
@@ -183,7 +198,7 @@ def parameter_tables(rows, arm, out) -> list:
         if not sel:
             continue
         for p, true in zip("MBK", arm if arm else (None,) * 3):
-            for e in ELEMENTS:
+            for e in _elements_of(sel[0]):
                 vals = np.array([r[f"{p}_{e}"] for r in sel])
                 line = {"variant": name, "parameter": f"{p}_{e}", "n_conditions": len(sel),
                         "fitted_mean": vals.mean(), "fitted_min": vals.min(),
@@ -234,8 +249,9 @@ def fig2(groups, arm, variants):
                       and (c.friction, c.resolution) in CORNERS),
                      key=lambda cg: (cg[0].friction, cg[0].resolution))
     n_rows = 3 if arm is not None else 2
-    fig, axes = plt.subplots(n_rows, 4, figsize=(16, 3.2 * n_rows + 1.2), sharex=True,
-                             squeeze=False)
+    els = _elements(next(iter(groups.values()))[0].n_dof) if groups else ELEMENTS
+    fig, axes = plt.subplots(n_rows, len(els), figsize=(4 * len(els), 3.2 * n_rows + 1.2),
+                             sharex=True, squeeze=False)
     f_band = None
     drawn = set()
     for cond, group in corners:
@@ -247,7 +263,7 @@ def fig2(groups, arm, variants):
                 continue
             drawn.add((cond.friction, cond.resolution, name))
             Zt = true_impedance(f_band, *arm) if arm is not None else None
-            for j, e in enumerate(ELEMENTS):
+            for j, e in enumerate(els):
                 z = Z[:, int(e[0]) - 1, int(e[1]) - 1]
                 axes[0, j].loglog(f_band, np.abs(z), style, color=color, lw=1.2)
                 axes[1, j].semilogx(f_band, np.degrees(np.angle(z)), style, color=color,
@@ -258,11 +274,11 @@ def fig2(groups, arm, variants):
                                       color=color, lw=1.2)
     if arm is not None and f_band is not None:
         zt = true_impedance(f_band, *arm)
-        for j, e in enumerate(ELEMENTS):
+        for j, e in enumerate(els):
             z = zt[:, int(e[0]) - 1, int(e[1]) - 1]
             axes[0, j].loglog(f_band, np.abs(z), **TRUTH_STYLE)
             axes[1, j].semilogx(f_band, np.degrees(np.angle(z)), **TRUTH_STYLE)
-    for j, e in enumerate(ELEMENTS):
+    for j, e in enumerate(els):
         axes[0, j].set_title(f"Z{e}")
         axes[-1, j].set_xlabel("frequency [Hz]")
         axes[0, j].set_ylabel(f"|Z{e}| [N m/rad]")
@@ -336,7 +352,7 @@ def _level_figure(rows, variant, panels, *, width, title):
         part = [r for r in sel if r["perturbation"] == level]
         for ax, (key, ylabel, panel_title) in zip(axes[a], panels):
             x = _condition_axis(ax, part, a == len(levels) - 1)
-            for e in ELEMENTS:
+            for e in _elements_of(part[0]):
                 ax.plot(x, [r[f"{key}_{e}"] for r in part], "o-", ms=4, label=f"Z{e}")
             ax.set_ylabel(ylabel)
             ax.set_title(panel_title.format(level=level), fontsize=10)

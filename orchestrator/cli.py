@@ -59,6 +59,9 @@ def _add_simulate(sub):
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--duration", type=float, default=50.0, help="trial length [s]")
     p.add_argument("--tuning", default="reference", choices=("reference", "robust"))
+    p.add_argument("--arm", default="2dof", choices=("2dof", "3dof"),
+                   help="reference configuration: two joints (reference.md) or shoulder, "
+                        "elbow, wrist (reference-3dof.md)")
     p.add_argument("--no-tde", action="store_true",
                    help="switch the controller's time-delay estimation off")
     p.add_argument("--effects", default=None,
@@ -77,7 +80,7 @@ def _simulate(args) -> int:
 
     dof = None if args.dof == "all" else _int(args.dof, "--dof")
     effects = _json(args.effects, "--effects")
-    setup = Setup.reference(args.friction, args.resolution, args.tuning)
+    setup = Setup.reference(args.friction, args.resolution, args.tuning, args.arm)
     if args.no_tde:
         setup = setup.with_controller(time_delay_estimation=False)
     trial = simulate_trial(setup, perturbed_dof=dof, level=args.perturbation, seed=args.seed,
@@ -107,6 +110,8 @@ def _add_grid(sub):
     p.add_argument("--seed", type=int, default=0, help="base seed")
     p.add_argument("--tuning", default="reference", choices=("reference", "robust"))
     p.add_argument("--effects", default=None, help="hidden effects as JSON")
+    p.add_argument("--arm", default="2dof", choices=("2dof", "3dof"),
+                   help="reference configuration (3dof: reference-3dof.md, --dofs 1 2 3 ...)")
     p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_grid)
@@ -120,7 +125,8 @@ def _grid(args) -> int:
                         resolution_levels=args.resolution,
                         perturbation_levels=args.perturbation, dofs=args.dofs,
                         duration_s=args.duration, base_seed=args.seed, tuning=args.tuning,
-                        effects=_json(args.effects, "--effects"), fmu_path=args.fmu)
+                        effects=_json(args.effects, "--effects"), fmu_path=args.fmu,
+                        arm=args.arm)
     print(f"grid: {manifest['n_done']} done, {manifest['n_skipped']} skipped, "
           f"{manifest['n_failed']} failed in {manifest['wall_s']:.1f} s -> {args.out}")
     for r in manifest["trials"]:
@@ -148,6 +154,10 @@ def _add_paper(sub):
     p.add_argument("--quick", action="store_true",
                    help="small built-in default: corners F0/F3 x R0/R3, level 3, 20 s")
     p.add_argument("--seed", type=int, default=0, help="base seed")
+    p.add_argument("--arm", default="2dof", choices=("2dof", "3dof"),
+                   help="reference configuration: 2dof (the paper's two joints) or 3dof "
+                        "(shoulder, elbow, wrist, reference-3dof.md: 48 conditions x 3 "
+                        "decomposition trials + 48 all-joints trials)")
     p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_paper)
@@ -159,7 +169,7 @@ def _paper(args) -> int:
     result = run_paper(args.out, quick=args.quick, tuning=args.tuning,
                        duration_s=args.duration, workers=args.workers,
                        scheduler=args.scheduler, progress=not args.no_progress,
-                       fmu_path=args.fmu, base_seed=args.seed)
+                       fmu_path=args.fmu, base_seed=args.seed, arm=args.arm)
     print("\n".join(summary_lines(result)))
     incomplete = result["grid"]["n_failed"] or result["skipped_conditions"]
     return 1 if incomplete else 0

@@ -64,14 +64,23 @@ def grid_seed(base_seed, perturbation_level, dof) -> int:
 
 def grid_tasks(*, friction_levels=(0, 1, 2, 3), resolution_levels=(0, 1, 2, 3),
                perturbation_levels=(1, 2, 3), dofs=(1, 2), duration_s=50.0, base_seed=0,
-               tuning="reference", effects=None, fmu_path=None) -> list:
+               tuning="reference", effects=None, fmu_path=None, arm="2dof") -> list:
     """The grid's trials as plain dicts (picklable task descriptions).
 
     ``dofs`` holds 1-based joints and/or ``"all"`` (or None): all joints perturbed at once.
+    ``arm``: the reference configuration, ``"2dof"`` (reference.md) or ``"3dof"``
+    (reference-3dof.md; joints 1-3).
     """
+    from .setup import REFERENCE_ARMS
+
+    if arm not in REFERENCE_ARMS:
+        raise SetupError(f"arm must be one of {sorted(REFERENCE_ARMS)}, got {arm!r}")
     joints = [parse_dof(k) for k in dofs]
     if len(set(joints)) != len(joints):
         raise SetupError(f"dofs lists a joint twice: {list(dofs)!r}")
+    bad = [k for k in joints if k is not None and k > REFERENCE_ARMS[arm]]
+    if bad:
+        raise SetupError(f"dofs {bad} beyond the {REFERENCE_ARMS[arm]} joints of arm {arm!r}")
     tasks = []
     for f in friction_levels:
         for r in resolution_levels:
@@ -81,7 +90,7 @@ def grid_tasks(*, friction_levels=(0, 1, 2, 3), resolution_levels=(0, 1, 2, 3),
                                   "resolution_level": r, "perturbation_level": p,
                                   "perturbed_dof": k, "seed": grid_seed(base_seed, p, k),
                                   "duration_s": duration_s, "tuning": tuning,
-                                  "effects": effects,
+                                  "effects": effects, "arm": arm,
                                   "fmu_path": None if fmu_path is None else str(fmu_path)})
     return tasks
 
@@ -95,7 +104,7 @@ def run_grid_task(task: dict, out_dir: str) -> dict:
     result = {k: v for k, v in task.items() if k != "fmu_path"}
     try:
         setup = Setup.reference(task["friction_level"], task["resolution_level"],
-                                task["tuning"])
+                                task["tuning"], task.get("arm", "2dof"))
         trial = simulate_trial(setup, perturbed_dof=task["perturbed_dof"],
                                level=task["perturbation_level"], seed=task["seed"],
                                duration_s=task["duration_s"], effects=task["effects"],
@@ -139,8 +148,10 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
     out.mkdir(parents=True, exist_ok=True)
     tasks = grid_tasks(**grid_options)
     if grid_options.get("fmu_path") is None:
+        from .setup import REFERENCE_ARMS
         from .trial import default_fmu_path
-        path = str(default_fmu_path())  # build once here, not in every worker
+        # build once here, not in every worker
+        path = str(default_fmu_path(REFERENCE_ARMS[grid_options.get("arm", "2dof")]))
         for t in tasks:
             t["fmu_path"] = path
     results = {}

@@ -21,6 +21,8 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+
 from .errors import SetupError
 from .grid import ALL_JOINTS, _write_json, run_grid
 
@@ -36,12 +38,14 @@ QUICK_PLAN = {"friction_levels": [0, 3], "resolution_levels": [0, 3],
               "perturbation_levels": [3], "duration_s": 20.0}
 #: Options that must match between a run and the trials already in its folder.
 _CHECKED = ("friction_levels", "resolution_levels", "perturbation_levels", "dofs",
-            "duration_s", "base_seed", "tuning", "fmu")
+            "duration_s", "base_seed", "tuning", "fmu", "arm")
+#: Truth of the report per reference arm (estimation.report.make_report).
+_TRUTH = {"2dof": "table1", "3dof": "reference-3dof"}
 
 
 def paper_plan(*, quick=False, tuning="reference", duration_s=None, base_seed=0,
                friction_levels=None, resolution_levels=None,
-               perturbation_levels=None) -> dict:
+               perturbation_levels=None, arm="2dof") -> dict:
     """The grid options of a paper run (:func:`orchestrator.grid.run_grid` keywords).
 
     Parameters
@@ -56,7 +60,14 @@ def paper_plan(*, quick=False, tuning="reference", duration_s=None, base_seed=0,
         Base of the seed rule (``orchestrator.grid.SEED_RULE``).
     friction_levels, resolution_levels, perturbation_levels : list of int, optional
         Override the plan's levels (e.g. one condition for a test).
+    arm : {"2dof", "3dof"}
+        The reference configuration: the paper's two joints, or shoulder-elbow-wrist
+        (reference-3dof.md: decomposition trials of joints 1, 2 and 3).
     """
+    from .setup import REFERENCE_ARMS
+
+    if arm not in REFERENCE_ARMS:
+        raise SetupError(f"arm must be one of {sorted(REFERENCE_ARMS)}, got {arm!r}")
     plan = dict(QUICK_PLAN if quick else FULL_PLAN)
     for key, value in (("friction_levels", friction_levels),
                        ("resolution_levels", resolution_levels),
@@ -69,14 +80,15 @@ def paper_plan(*, quick=False, tuning="reference", duration_s=None, base_seed=0,
         raise SetupError(f"duration_s must be positive, got {plan['duration_s']!r}")
     if tuning not in ("reference", "robust"):
         raise SetupError(f"tuning must be 'reference' or 'robust', got {tuning!r}")
-    plan.update(dofs=list(PAPER_DOFS), base_seed=int(base_seed), tuning=tuning)
+    dofs = list(range(1, REFERENCE_ARMS[arm] + 1)) + [ALL_JOINTS]
+    plan.update(dofs=dofs, base_seed=int(base_seed), tuning=tuning, arm=arm)
     return plan
 
 
 def run_paper(out, *, quick=False, tuning="reference", duration_s=None, workers=2,
               scheduler=None, progress=True, fmu_path=None, base_seed=0,
               friction_levels=None, resolution_levels=None,
-              perturbation_levels=None) -> dict:
+              perturbation_levels=None, arm="2dof") -> dict:
     """Run the paper's study into ``out``: trials, then the estimation report.
 
     Parameters
@@ -85,8 +97,8 @@ def run_paper(out, *, quick=False, tuning="reference", duration_s=None, workers=
         Run folder: ``trials/`` (trials, ``grid.json``, ``failures.json``), ``report/``
         (figures and tables, estimation.report) and ``paper.json``.
     quick, tuning, duration_s, base_seed, friction_levels, resolution_levels,
-    perturbation_levels
-        The plan, see :func:`paper_plan`.
+    perturbation_levels, arm
+        The plan, see :func:`paper_plan` (``arm="3dof"``: the three-joint study).
     workers : int
         Local processes for the trials (1: in this process).
     scheduler : str or distributed.Client, optional
@@ -115,7 +127,7 @@ def run_paper(out, *, quick=False, tuning="reference", duration_s=None, workers=
     out = Path(out)
     plan = paper_plan(quick=quick, tuning=tuning, duration_s=duration_s, base_seed=base_seed,
                       friction_levels=friction_levels, resolution_levels=resolution_levels,
-                      perturbation_levels=perturbation_levels)
+                      perturbation_levels=perturbation_levels, arm=arm)
     options = {**plan, "quick": bool(quick),
                "fmu": None if fmu_path is None else Path(fmu_path).name}
     _check_previous(out, options)
@@ -126,7 +138,7 @@ def run_paper(out, *, quick=False, tuning="reference", duration_s=None, workers=
     manifest = run_grid(trials_dir, workers=workers, scheduler=scheduler, progress=progress,
                         fmu_path=fmu_path, **plan)
     grid_s = time.perf_counter() - start
-    report = make_report(trials_dir, report_dir, truth="table1", progress=progress)
+    report = make_report(trials_dir, report_dir, truth=_TRUTH[arm], progress=progress)
     result = {
         "format": PAPER_FORMAT, "status": "done", "out": str(out),
         "trials_dir": str(trials_dir), "report_dir": str(report_dir), "options": options,
@@ -134,12 +146,65 @@ def run_paper(out, *, quick=False, tuning="reference", duration_s=None, workers=
         | {"failures": [{"name": r["name"], "error": r["error"]}
                         for r in manifest["trials"] if r["status"] == "failed"]},
         "skipped_conditions": report["skipped"], "summary": report["summary"],
+        "acceptance": acceptance(report["rows"], arm),
         "files": report["files"],
         "wall_s": {"grid": round(grid_s, 2),
                    "report": round(time.perf_counter() - start - grid_s, 2),
                    "total": round(time.perf_counter() - start, 2)}}
     _write_json(out / PAPER_FILE, result)
     return result
+
+
+#: Targets of the three-joint study (issue 10): VAF [%] at least, M, B, K errors [%] at most.
+TARGETS = {"vaf_min": 99.5, "M": 2.0, "B": 3.0, "K": 2.0}
+
+
+def normalized_errors(row: dict, truth) -> dict:
+    """Largest |error| [%] of the fitted M, B, K of one scored row over every element:
+    diagonal elements relative to themselves, off-diagonal ones relative to
+    sqrt(X_ii X_kk) (the wrist couplings are small, reference-3dof.md).
+
+    Parameters
+    ----------
+    row : dict
+        A row of estimation.report.make_report (``M_ik``... fitted values).
+    truth : (M, B, K) ndarrays (n, n)
+    """
+    out = {}
+    for p, X in zip("MBK", truth):
+        n = len(X)
+        d = np.sqrt(np.abs(np.outer(np.diag(X), np.diag(X))))
+        err = [abs(row[f"{p}_{i + 1}{k + 1}"] - X[i, k]) / d[i, k] * 100
+               for i in range(n) for k in range(n)]
+        out[p] = float(max(err))
+    return out
+
+
+def acceptance(rows, arm="2dof") -> list[dict]:
+    """Worst case per tuning and variant against :data:`TARGETS`, with the normalised
+    errors of :func:`normalized_errors`: ``vaf_min``, ``err_M_max``..., ``worst`` (the
+    condition of each worst case) and ``meets`` (every target met in every condition)."""
+    from trialformat import reference as ref
+
+    truth = ref.arm_matrices(arm)
+    out = {}
+    for r in rows:
+        key = (r["tuning"], r["variant"])
+        cond = f"F{r['friction']}R{r['resolution']}P{r['perturbation']}"
+        e = normalized_errors(r, truth)
+        a = out.setdefault(key, {"tuning": key[0], "variant": key[1], "n_conditions": 0,
+                                 "vaf_min": np.inf, "err_M_max": 0.0, "err_B_max": 0.0,
+                                 "err_K_max": 0.0, "worst": {}})
+        a["n_conditions"] += 1
+        if r["vaf_min"] < a["vaf_min"]:
+            a["vaf_min"], a["worst"]["vaf"] = r["vaf_min"], cond
+        for p in "MBK":
+            if e[p] > a[f"err_{p}_max"]:
+                a[f"err_{p}_max"], a["worst"][p] = e[p], cond
+    for a in out.values():
+        a["meets"] = bool(a["vaf_min"] >= TARGETS["vaf_min"]
+                          and all(a[f"err_{p}_max"] <= TARGETS[p] for p in "MBK"))
+    return list(out.values())
 
 
 def _check_previous(out: Path, options: dict) -> None:
@@ -151,6 +216,7 @@ def _check_previous(out: Path, options: dict) -> None:
     except (ValueError, KeyError, TypeError) as exc:
         raise SetupError(f"{path}: not a paper run record ({exc}); remove it or use another "
                          f"--out") from None
+    previous.setdefault("arm", "2dof")  # runs made before the option existed
     diff = [f"{k}: {previous.get(k)!r} there, {options.get(k)!r} now" for k in _CHECKED
             if previous.get(k) != options.get(k)]
     if diff:
@@ -183,6 +249,17 @@ def summary_lines(result, variants=None) -> list[str]:
                 f"R^2 {row['r2_min']:.5f}  M {row['err_M_max']:5.2f} %  "
                 f"B {row['err_B_max']:5.2f} %  K {row['err_K_max']:5.2f} %  "
                 f"({VARIANT_LABELS.get(row['variant'], '')}, {row['n_conditions']} conditions)")
+    if result.get("acceptance"):
+        lines.append(f"targets (VAF >= {TARGETS['vaf_min']} %, M/B/K within {TARGETS['M']}/"
+                     f"{TARGETS['B']}/{TARGETS['K']} %; off-diagonal errors relative to "
+                     f"sqrt(X_ii X_kk)):")
+        for a in result["acceptance"]:
+            if a["variant"] in variants or a["variant"].startswith("closed_loop_corrected"):
+                lines.append(
+                    f"  {a['tuning']:9s} {a['variant']:22s} VAF {a['vaf_min']:7.3f} %  "
+                    f"M {a['err_M_max']:5.2f} %  B {a['err_B_max']:5.2f} %  "
+                    f"K {a['err_K_max']:5.2f} %  {'met' if a['meets'] else 'NOT met'} "
+                    f"(worst: {a['worst']})")
     lines.append(f"report: {result['report_dir']} (table_summary.md: every estimator, MIMO "
                  f"baselines included)")
     return lines

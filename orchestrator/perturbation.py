@@ -26,7 +26,8 @@ def make_perturbation(level: int, seed: int, n_samples: int, n_dof: int = 2,
     Parameters
     ----------
     level : int
-        Perturbation level 1-3 (peaks [3, 1.8], [6, 3.6], [9, 5.4] N m).
+        Perturbation level 1-3 (peaks [3, 1.8], [6, 3.6], [9, 5.4] N m; three joints
+        (reference-3dof.md): [3, 1.8, 0.6], [6, 3.6, 1.2], [9, 5.4, 1.8] N m).
     seed : int
         Seed of ``numpy.random.default_rng``.
     n_samples : int
@@ -38,7 +39,7 @@ def make_perturbation(level: int, seed: int, n_samples: int, n_dof: int = 2,
     perturbed_dof : int or None
         1-based joint to perturb alone (other columns zero), or None for all joints.
     peak : sequence of float [N m], optional
-        Peaks per joint overriding the level's (needed when n_dof is not 2).
+        Peaks per joint overriding the level's (needed when n_dof is not 2 or 3).
 
     Returns
     -------
@@ -46,7 +47,9 @@ def make_perturbation(level: int, seed: int, n_samples: int, n_dof: int = 2,
     """
     spec = ref.reference()["perturbation"]
     try:
-        peaks = np.asarray(ref.perturbation_peak(level) if peak is None else peak, dtype=float)
+        arm = {2: "2dof", 3: "3dof"}.get(n_dof, "2dof")  # the reference of n_dof joints
+        peaks = np.asarray(ref.perturbation_peak(level, arm) if peak is None else peak,
+                           dtype=float)
     except ValueError as exc:
         raise SetupError(str(exc)) from None
     if peaks.shape != (n_dof,):

@@ -15,33 +15,46 @@ from pathlib import Path
 import numpy as np
 
 REFERENCE_PATH = Path(__file__).with_name("reference.json")
+#: The reference configurations by name: the paper's two joints (docs/spec/reference.md)
+#: and shoulder-elbow-wrist (docs/spec/reference-3dof.md), same keys.
+ARMS = {"2dof": REFERENCE_PATH, "3dof": Path(__file__).with_name("reference-3dof.json")}
 
 
-@lru_cache(maxsize=1)
-def _load() -> dict:
-    with open(REFERENCE_PATH, encoding="utf-8") as fh:
+@lru_cache(maxsize=None)
+def _load(arm: str = "2dof") -> dict:
+    if arm not in ARMS:
+        raise ValueError(f"reference arm must be one of {sorted(ARMS)}, got {arm!r}")
+    with open(ARMS[arm], encoding="utf-8") as fh:
         return json.load(fh)
 
 
-def reference() -> dict:
-    """Return a fresh deep copy of the reference configuration (safe to modify)."""
-    return copy.deepcopy(_load())
+def reference(arm: str = "2dof") -> dict:
+    """Return a fresh deep copy of a reference configuration (safe to modify).
+
+    ``arm``: ``"2dof"`` (reference.md) or ``"3dof"`` (reference-3dof.md); ValueError else.
+    """
+    return copy.deepcopy(_load(arm))
 
 
-def arm_matrices() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Table I arm matrices ``(M_h, B_h, K_h)`` as 2x2 arrays, used as printed."""
-    arm = _load()["human_arm"]
-    return tuple(np.array(arm[key], dtype=float) for key in ("M_h", "B_h", "K_h"))
+def arm_matrices(arm: str = "2dof") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Arm matrices ``(M_h, B_h, K_h)``, used as printed: Table I (2x2) or reference-3dof.md
+    (3x3)."""
+    block = _load(arm)["human_arm"]
+    return tuple(np.array(block[key], dtype=float) for key in ("M_h", "B_h", "K_h"))
 
 
-def friction_level(level: int, n_dof: int = 2) -> dict:
-    """Friction metadata block (log-format.md keys) for a reference friction level 0-3."""
-    ref = _load()["friction"]
+def friction_level(level: int, n_dof: int = 2, arm: str = "2dof") -> dict:
+    """Friction metadata block (log-format.md keys) for a reference friction level 0-3
+    (reference-3dof.md: joint 3 has 0.25 x the level's Fc, Fs and sigma2)."""
+    ref = _load(arm)["friction"]
     row = _level_row(ref["levels"], level, "friction")
+    scale = ref.get("joint_scale", [1.0] * n_dof)
+    if len(scale) != n_dof:
+        raise ValueError(f"the {arm} reference has {len(scale)} joints, not n_dof={n_dof}")
     return {
-        "Fc": [row["Fc"]] * n_dof,
-        "Fs": [row["Fs"]] * n_dof,
-        "sigma2": [row["sigma2"]] * n_dof,
+        "Fc": [row["Fc"] * s for s in scale],
+        "Fs": [row["Fs"] * s for s in scale],
+        "sigma2": [row["sigma2"] * s for s in scale],
         "sigma0": ref["sigma0"],
         "sigma1": ref["sigma1"],
         "ws": ref["ws"],
@@ -54,17 +67,17 @@ def sensor_level(level: int) -> dict:
     return {"encoder_resolution_deg": row["encoder_deg"], "torque_resolution_nm": row["torque_nm"]}
 
 
-def perturbation_peak(level: int) -> list[float]:
+def perturbation_peak(level: int, arm: str = "2dof") -> list[float]:
     """Peak |tau_delta| per joint [N m] for perturbation level 1-3."""
-    levels = _load()["perturbation"]["levels"]
+    levels = _load(arm)["perturbation"]["levels"]
     if level not in (1, 2, 3):
         raise ValueError(f"perturbation level must be 1, 2 or 3, got {level!r}")
     return list(levels[level - 1])
 
 
-def controller(tuning: str = "reference") -> dict:
+def controller(tuning: str = "reference", arm: str = "2dof") -> dict:
     """Controller metadata block for the 'reference' or 'robust' tuning (reference.md s. 7)."""
-    ref = _load()
+    ref = _load(arm)
     block = copy.deepcopy(ref["controller"])
     if tuning == "robust":
         block.update(copy.deepcopy(ref["controller_robust"]))
@@ -74,9 +87,9 @@ def controller(tuning: str = "reference") -> dict:
     return block
 
 
-def robot() -> dict:
-    """Robot metadata block (reference.md section 3)."""
-    block = copy.deepcopy(_load()["robot"])
+def robot(arm: str = "2dof") -> dict:
+    """Robot metadata block (reference.md section 3; reference-3dof.md adds link 3)."""
+    block = copy.deepcopy(_load(arm)["robot"])
     return block
 
 

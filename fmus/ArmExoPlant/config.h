@@ -106,6 +106,7 @@ typedef struct {
 
     int i_th, i_w, i_z[N_JOINTS], i_ta, i_qm[N_JOINTS], i_wm[N_JOINTS], i_thh, i_wh, i_y;
     int basic;                      /* rigid transmission and cuff, no lags */
+    double Ac[N_JOINTS][N_JOINTS];  /* M_h + diag(Jm): constant part of the fast path's matrix */
 
     /* sin/cos of the relative joint angles q_2..q_n at the start of the RK4 step */
     double q_ref[N_JOINTS], s_ref[N_JOINTS], c_ref[N_JOINTS];

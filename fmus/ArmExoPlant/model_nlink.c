@@ -65,9 +65,27 @@ robot_mass(const ModelData *d, double C[NJ][NJ], double M[NJ][NJ]) {
     }
 }
 
-/* Solve A x = b in place (b <- x) by Gaussian elimination without pivoting: A is
- * M_r + M_h, whose leading minors model_initialize() checked over all angles. */
+/* Solve A x = b in place (b <- x).  Three links: Cramer's rule with the adjugate (one
+ * division).  Otherwise Gaussian elimination without pivoting: A is M_r + M_h, whose
+ * leading minors model_initialize() checked over all angles. */
 __attribute__((always_inline)) static inline void solve(double A[NJ][NJ], double *b) {
+#if NJ == 3
+    const double c00 = A[1][1] * A[2][2] - A[1][2] * A[2][1];
+    const double c01 = A[1][2] * A[2][0] - A[1][0] * A[2][2];
+    const double c02 = A[1][0] * A[2][1] - A[1][1] * A[2][0];
+    const double idet = 1.0 / (A[0][0] * c00 + A[0][1] * c01 + A[0][2] * c02);
+    const double c10 = A[0][2] * A[2][1] - A[0][1] * A[2][2];
+    const double c11 = A[0][0] * A[2][2] - A[0][2] * A[2][0];
+    const double c12 = A[0][1] * A[2][0] - A[0][0] * A[2][1];
+    const double c20 = A[0][1] * A[1][2] - A[0][2] * A[1][1];
+    const double c21 = A[0][2] * A[1][0] - A[0][0] * A[1][2];
+    const double c22 = A[0][0] * A[1][1] - A[0][1] * A[1][0];
+    const double b0 = b[0], b1 = b[1], b2 = b[2];
+    b[0] = (c00 * b0 + c10 * b1 + c20 * b2) * idet;
+    b[1] = (c01 * b0 + c11 * b1 + c21 * b2) * idet;
+    b[2] = (c02 * b0 + c12 * b1 + c22 * b2) * idet;
+    return;
+#endif
     for (int k = 0; k < NJ; k++) {
         const double inv = 1.0 / A[k][k];
         for (int i = k + 1; i < NJ; i++) {
@@ -258,6 +276,8 @@ int model_initialize(ModelInstance *comp) {
 
     d->basic = !d->has_act_lag && !d->has_iface && !d->has_sens_lag;
     for (j = 0; j < NJ; j++) d->basic = d->basic && !d->trans[j];
+    for (i = 0; i < NJ; i++)  /* constant part of M_r + M_h of the fast path */
+        for (j = 0; j < NJ; j++) d->Ac[i][j] = d->Mh[i][j] + (i == j ? d->Jm[i] : 0.0);
 
     /* --- state layout; the fast path has [th, w, z] at 0 .. 3n-1 --- */
     d->i_th = n; n += NJ;
@@ -446,7 +466,57 @@ __attribute__((always_inline)) static inline void deriv_general(const ModelData 
     evaluate(d, x, dx, NULL);
 }
 
-RK4_DEFINE(rk4_basic, 3 * NJ, 3 * NJ, deriv_general)
+/* Fast path (d->basic): x = [theta, w, z], rigid transmission and cuff, no lags; the same
+ * equations as evaluate() without the effects and without tau_h. */
+__attribute__((always_inline)) static inline void deriv_basic(const ModelData *d, const double *x, double *dx) {
+    const double *th = x, *w = x + NJ, *z = x + 2 * NJ;
+    double sn[NJ], cs[NJ], C[NJ][NJ], S[NJ][NJ], A[NJ][NJ], f[NJ], zd;
+    int a, b, j, k;
+    sn[0] = 0.0; cs[0] = 1.0;
+    for (j = 1; j < NJ; j++) {
+        const double e = th[j] + d->q0[j] - d->q_ref[j];
+        if (fabs(e) < 1e-4) {
+            const double e2 = e * e;
+            const double se = e - e * e2 * (1.0 / 6.0), ce = 1.0 - 0.5 * e2;
+            sn[j] = d->s_ref[j] * ce + d->c_ref[j] * se;
+            cs[j] = d->c_ref[j] * ce - d->s_ref[j] * se;
+        } else {
+            sn[j] = sin(th[j] + d->q0[j]);
+            cs[j] = cos(th[j] + d->q0[j]);
+        }
+    }
+    relative_angles(sn, cs, C, S);
+    for (j = 0; j < NJ; j++) {
+        f[j] = d->u[j];
+        if (d->friction[j]) { f[j] -= friction(d, j, w[j], z[j], &zd); dx[2 * NJ + j] = zd; }
+        else dx[2 * NJ + j] = 0.0;
+        for (k = 0; k < NJ; k++) f[j] -= d->Bh[j][k] * w[k] + d->Kh[j][k] * th[k];
+    }
+    {
+        double pd2[NJ], acc = 0.0, qc[NJ];
+        for (b = 0; b < NJ; b++) { acc += w[b]; pd2[b] = acc * acc; }
+        for (a = 0; a < NJ; a++) {
+            double q = 0.0;
+            for (b = 0; b < a; b++) q += d->d[a][b] * S[b][a] * pd2[b];
+            for (b = a + 1; b < NJ; b++) q -= d->d[a][b] * S[a][b] * pd2[b];
+            qc[a] = q;
+        }
+        acc = 0.0;
+        for (j = NJ - 1; j >= 0; j--) { acc += qc[j]; f[j] -= acc; }
+    }
+    if (d->has_gravity) {
+        double phi = 0.0, acc = 0.0, qg[NJ];
+        for (a = 0; a < NJ; a++) { phi += d->q0[a] + th[a]; qg[a] = d->gq[a] * cos(phi); }
+        for (j = NJ - 1; j >= 0; j--) { acc += qg[j]; f[j] -= acc; }
+    }
+    robot_mass(d, C, A);
+    for (j = 0; j < NJ; j++)
+        for (k = 0; k < NJ; k++) A[j][k] += d->Ac[j][k];
+    solve(A, f);
+    for (j = 0; j < NJ; j++) { dx[j] = w[j]; dx[NJ + j] = f[j]; }
+}
+
+RK4_DEFINE(rk4_basic, 3 * NJ, 3 * NJ, deriv_basic)
 RK4_DEFINE(rk4_general, NX_MAX, s->nx, deriv_general)
 
 int model_advance(Snapshot *s, long long n) {

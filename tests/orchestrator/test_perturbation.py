@@ -50,7 +50,7 @@ def test_transient_discarded():
 
 @pytest.mark.parametrize("kwargs,match", [
     ({"level": 4}, "level"), ({"perturbed_dof": 3}, "perturbed_dof"),
-    ({"n_dof": 3}, "peak"), ({"n_samples": 0}, "n_samples")])
+    ({"n_dof": 4}, "peak"), ({"n_samples": 0}, "n_samples")])
 def test_bad_input(kwargs, match):
     args = {"level": 1, "seed": 0, "n_samples": 100}
     args.update(kwargs)
