@@ -109,8 +109,9 @@ def condition_of(trial) -> Condition:
     """The condition a trial declares in its metadata."""
     meta = trial.meta
     fric = meta["friction"]
+    arm = "3dof" if trial.n_dof == 3 else "2dof"  # reference-3dof.md: joint 3 at 0.25 x
     friction = next((lvl for lvl in range(4) if all(
-        np.allclose(fric[k], ref.friction_level(lvl, trial.n_dof)[k])
+        np.allclose(fric[k], ref.friction_level(lvl, trial.n_dof, arm)[k])
         for k in ("Fc", "Fs", "sigma2"))), "custom")
     sens = meta["sensors"]
     resolution = next((lvl for lvl in range(4) if all(
