@@ -36,6 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate(sub)
     _add_grid(sub)
     _add_paper(sub)
+    _add_tractability(sub)
     _add_info(sub)
     for module in ("estimation.cli", "diagnosis.cli"):
         try:
@@ -173,6 +174,41 @@ def _paper(args) -> int:
     print("\n".join(summary_lines(result)))
     incomplete = result["grid"]["n_failed"] or result["skipped_conditions"]
     return 1 if incomplete else 0
+
+
+# ----------------------------------------------------------------------------- tractability
+def _add_tractability(sub):
+    p = sub.add_parser(
+        "tractability", help="decomposition vs MIMO as the number of joints grows (n = 2..7)",
+        description="The tractability study of docs/spec/reference-3dof.md: per n and total "
+                    "experiment time T, n decomposition trials of T/n against one all-joints "
+                    "trial of T (n = 2, 3 on the C FMU, n = 3..7 on the linear pythonfmu "
+                    "plant); writes OUT/tractability.json, OUT/table.md and "
+                    "OUT/fig_tractability.png (resumable).")
+    p.add_argument("--out", required=True, help="run folder (re-running resumes)")
+    p.add_argument("--n", type=int, nargs="+", default=None, help="numbers of joints (2..7)")
+    p.add_argument("--totals", type=float, nargs="+", default=None,
+                   help="total experiment times T [s] (default 70 175 350)")
+    p.add_argument("--quick", action="store_true", help="n = 2, 3, 4 at T = 70 s")
+    p.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_tractability)
+
+
+def _tractability(args) -> int:
+    from . import tractability as tr
+
+    kwargs = {}
+    if args.n:
+        kwargs["ns"] = tuple(args.n)
+    if args.totals:
+        kwargs["totals_s"] = tuple(args.totals)
+    result = tr.run_tractability(args.out, quick=args.quick, workers=args.workers,
+                                 progress=not args.no_progress, **kwargs)
+    print("\n".join(tr.summary_lines(result)))
+    print(f"table: {Path(args.out) / 'table.md'}; figure: "
+          f"{Path(args.out) / 'fig_tractability.png'}")
+    return 1 if result["failures"] else 0
 
 
 # ----------------------------------------------------------------------------- info

@@ -1,4 +1,4 @@
-"""A second plant FMU from another exporter: a linear 2-DOF arm on a linear robot.
+"""A second plant FMU from another exporter: a linear n-DOF arm on a linear robot.
 
 Built with pythonfmu (``orchestrator.plants.build_linear_arm_fmu``), it keeps the plant
 contract (docs/spec/plant-contract.md) so the orchestrator drives it unchanged:
@@ -6,7 +6,9 @@ contract (docs/spec/plant-contract.md) so the orchestrator drives it unchanged:
     (M_r + M_h) theta'' + B_h theta' + K_h theta = tau_m
     tau_h = M_h theta'' + B_h theta' + K_h theta
 
-with a constant robot mass matrix ``M_r``, no friction and rigid coupling. Each
+with a constant robot mass matrix ``M_r``, no friction and rigid coupling. The shipped
+configuration is two joints (Table I); :func:`orchestrator.plants.build_linear_arm_fmu`
+rewrites the configuration block below for n joints (the tractability study, n = 4..7). Each
 communication step is integrated exactly for the input held over the step (zero-order-hold
 discretisation with the matrix exponential), so the plant is analytic. The outputs are the
 left limit at the end of the step with the held input (as the reference plant).
@@ -19,6 +21,7 @@ from scipy.linalg import expm
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 
+# --- configuration (build_linear_arm_fmu rewrites this block for n joints) ---
 # Table I (reference.md section 2) and the robot's mass matrix at the posture
 # (reference.md section 3, q2 = 77.260 deg, Jm = 0.010 on the diagonal).
 _M_H = ((0.187, 0.084), (0.079, 0.060))
@@ -27,6 +30,7 @@ _K_H = ((7.967, 3.187), (1.663, 6.901))
 _M_R = ((0.2090303562, 0.0524026781), (0.0524026781, 0.050825))
 _POSTURE_DEG = (62.708, 77.260)
 _N = 2
+# --- end of configuration ---
 
 
 class LinearArmPlant(Fmi2Slave):
@@ -40,7 +44,7 @@ class LinearArmPlant(Fmi2Slave):
     """
 
     author = "arm-impedance-cosim"
-    description = "Linear 2-DOF arm on a linear robot (constant mass matrix, no friction)"
+    description = f"Linear {_N}-DOF arm on a linear robot (constant mass matrix, no friction)"
 
     def __init__(self, omit_outputs=(), **kwargs):
         super().__init__(**kwargs)
@@ -91,6 +95,17 @@ class LinearArmPlant(Fmi2Slave):
         self._cache = {}
         self._update_outputs()
 
+    def _output_map(self):
+        """(Cy, Dy): tau_h = Cy [theta; omega] + Dy tau_m (from the parameters, cached)."""
+        if "out" not in self._cache:
+            n = _N
+            m_inv = np.linalg.inv(self.M_r + self.M_h)
+            acc_x = -m_inv @ np.hstack([self.K_h, self.B_h])   # accel = acc_x x + m_inv u
+            cy = self.M_h @ acc_x + np.hstack([self.K_h, self.B_h])
+            self._cache["out"] = (cy, self.M_h @ m_inv)
+            assert cy.shape == (n, 2 * n)
+        return self._cache["out"]
+
     def _discretised(self, h):
         """(Ad, Bd) of the ZOH discretisation for step h [s], cached per step."""
         key = round(h, 15)
@@ -107,11 +122,9 @@ class LinearArmPlant(Fmi2Slave):
         return self._cache[key]
 
     def _update_outputs(self):
-        n = _N
-        theta, omega = self.x[:n], self.x[n:]
-        accel = np.linalg.solve(self.M_r + self.M_h,
-                                self.tau_m - self.B_h @ omega - self.K_h @ theta)
-        self.tau_h[:] = self.M_h @ accel + self.B_h @ omega + self.K_h @ theta
+        # tau_h = M_h accel + B_h omega + K_h theta, accel from the equation of motion
+        cy, dy = self._output_map()
+        self.tau_h[:] = cy @ self.x + dy @ self.tau_m
 
     def do_step(self, current_time, step_size):
         a_d, b_d = self._discretised(step_size)
