@@ -185,8 +185,10 @@ def _norm(name: str) -> str:
 
 def _near(name: str, by_name: dict) -> str:
     """'; near: ...' listing the plant's names that look like ``name``, or ''."""
-    key = _norm(name)
-    near = [v for v in by_name if v.endswith("." + name) or _norm(v) == key]
+    key, base = _norm(name), name.split("[")[0]
+    # prefixed (plant.theta[1]), spelled otherwise (theta_1, theta(1)), or one array variable
+    # (theta: FMI 3.0 arrays are refused, the contract names scalars)
+    near = [v for v in by_name if v.endswith("." + name) or _norm(v) == key or v == base]
     near += [v for v in difflib.get_close_matches(name, list(by_name), n=3, cutoff=0.8)
              if v not in near]
     return f"; the plant has {', '.join(near[:3])} (the contract names arrays name[j], " \
