@@ -206,7 +206,7 @@ def test_contract_error_suggests_near_names(swap, variant, near):
         with pytest.raises(ContractError) as info:
             Plant(swap(variant))
     msg = str(info.value)
-    assert f"missing variable theta[1] (output, Real, rad)" in msg
+    assert "missing variable theta[1] (output, Real, rad)" in msg
     assert f"the plant has {near}" in msg
 
 
