@@ -13,7 +13,10 @@ Measured side by side, in one run (best of --repeat):
 * ``inside doStep``: the time summed around the raw fmi2DoStep calls minus the cost of
   a ctypes call (a trivial fmi2GetRealStatus call, timed the same way), i.e. the C time;
   also shown per RK4 step;
-* ``C one call``: a single fmi2DoStep of 50 s (constant torque): the solver alone.
+* ``C one call``: a single fmi2DoStep of 50 s (constant torque): the solver alone;
+* ``PlantIO fmi2 / fmi3``: the master's own access (``orchestrator.plant.PlantIO``: pre-bound
+  read / write / step) on the FMI 2.0 build and on the FMI 3.0 build of the same sources,
+  which must give identical outputs.
 
 Wall times are sensitive to other processes on the machine: the load average is printed
 and stored, and CPU times (process for the loops, thread for the single call) are given
@@ -44,6 +47,7 @@ from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 import fmus  # noqa: E402
+from orchestrator.plant import Plant  # noqa: E402
 from fmus.build import CFLAGS  # noqa: E402
 from fmus.variables import MODEL_NAME, VR, friction_parameters  # noqa: E402
 
@@ -156,6 +160,25 @@ class Bench:
         return time.perf_counter() - t0, time.thread_time() - c0
 
 
+def run_plantio(plant: Plant, level: int, u: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """The master's per-sample access on a Plant: (wall time, CPU time, last outputs)."""
+    plant.start(friction_parameters(level))
+    io = plant.io
+    read, write, step, val_in, val_out = io.read, io.write, io.step, io.val_in, io.val_out
+    ul = u.tolist()
+    status = 0
+    c0, t0 = time.process_time(), time.perf_counter()
+    for k in range(N):
+        val_in[0], val_in[1] = ul[k]
+        status |= write()
+        status |= step(k * TS, TS, 1)
+        status |= read()
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    if status:
+        raise RuntimeError(f"an FMI call failed in the PlantIO loop of {plant.path.name}")
+    return wall, cpu, np.array(val_out[:])
+
+
 def cpu_model() -> str:
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -185,6 +208,8 @@ def main(argv=None) -> int:
     u = torque()
     res = {}
     ovh = min(b.call_overhead() for _ in range(args.repeat))
+    plants = {2: Plant(fmu_path), 3: Plant(fmus.default_fmu_path(fmi_version=3))}
+    plantio = {}
     for level in (0, 3):
         best = dict.fromkeys(("fmpy", "fmpy_cpu", "raw", "raw_cpu", "in_step", "one_call", "one_call_cpu"), np.inf)
         for _ in range(args.repeat):  # side by side: each mode once per repetition
@@ -195,6 +220,13 @@ def main(argv=None) -> int:
             for key, val in (("fmpy", t_fmpy), ("fmpy_cpu", c_fmpy), ("raw", t_raw), ("raw_cpu", c_raw),
                              ("in_step", t_in - N * ovh), ("one_call", t_one), ("one_call_cpu", c_one)):
                 best[key] = min(best[key], val)
+            for version, plant in plants.items():
+                t_io, c_io, y_io = run_plantio(plant, level, u)
+                assert np.array_equal(y_io, y2[[0, 1, 2, 3]]), f"PlantIO FMI {version} differs"
+                key = f"fmi{version}"
+                best_io = plantio.setdefault(level, {}).setdefault(key, {"wall_s": np.inf, "cpu_s": np.inf})
+                best_io["wall_s"] = min(best_io["wall_s"], t_io)
+                best_io["cpu_s"] = min(best_io["cpu_s"], c_io)
         steps = T_END / H
         res[level] = {
             "wall_fmpy_s": best["fmpy"],
@@ -239,6 +271,13 @@ def main(argv=None) -> int:
         "wall_raw_over_target_level3": res[3]["wall_raw_s"] / TARGETS[3],
     }
     print("ratios: " + ", ".join(f"{k} = {v:.2f}" for k, v in ratios.items()))
+    print("master's PlantIO loop (read / write / step), same sources as FMI 2.0 and FMI 3.0:")
+    for level, r in plantio.items():
+        ratios[f"plantio_fmi3_over_fmi2_cpu_level{level}"] = r["fmi3"]["cpu_s"] / r["fmi2"]["cpu_s"]
+        print(f"  friction {level}: FMI 2.0 {r['fmi2']['wall_s']:.3f} s (cpu {r['fmi2']['cpu_s']:.3f} s), "
+              f"FMI 3.0 {r['fmi3']['wall_s']:.3f} s (cpu {r['fmi3']['cpu_s']:.3f} s), identical outputs")
+    for plant in plants.values():
+        plant.close()
 
     out = {
         "benchmark": "bench/bench_plant.py",
@@ -251,6 +290,7 @@ def main(argv=None) -> int:
                   "repeat": args.repeat, "input": "seeded sum of 25 sines 0.2-15 Hz, peaks [3, 1.8] N m"},
         "ctypes_call_overhead_ns": ovh * 1e9,
         "friction_level": {str(k): v for k, v in res.items()},
+        "plantio": {str(k): v for k, v in plantio.items()},
         "ratios": ratios,
     }
     path = Path(args.json)

@@ -185,8 +185,10 @@ def _norm(name: str) -> str:
 
 def _near(name: str, by_name: dict) -> str:
     """'; near: ...' listing the plant's names that look like ``name``, or ''."""
-    key = _norm(name)
-    near = [v for v in by_name if v.endswith("." + name) or _norm(v) == key]
+    key, base = _norm(name), name.split("[")[0]
+    # prefixed (plant.theta[1]), spelled otherwise (theta_1, theta(1)), or one array variable
+    # (theta: FMI 3.0 arrays are refused, the contract names scalars)
+    near = [v for v in by_name if v.endswith("." + name) or _norm(v) == key or v == base]
     near += [v for v in difflib.get_close_matches(name, list(by_name), n=3, cutoff=0.8)
              if v not in near]
     return f"; the plant has {', '.join(near[:3])} (the contract names arrays name[j], " \
@@ -289,9 +291,10 @@ class PlantIO:
             return
         real_io = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, vr_p, ctypes.c_size_t, dbl_p,
                                    ctypes.c_size_t)
-        bool_p = ctypes.POINTER(ctypes.c_bool)
+        # the four out-pointers are passed as plain addresses (cheaper than byref per call)
+        ptr = ctypes.c_void_p
         do_step = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double,
-                                   ctypes.c_bool, bool_p, bool_p, bool_p, dbl_p)
+                                   ctypes.c_bool, ptr, ptr, ptr, ptr)
         self.set_real = real_io(("fmi3SetFloat64", dll))
         self.get_real = real_io(("fmi3GetFloat64", dll))
         self.do_step_raw = do_step(("fmi3DoStep", dll))
@@ -301,12 +304,13 @@ class PlantIO:
                                        self.n_in)
         flags = [ctypes.c_bool() for _ in range(3)]
         last = ctypes.c_double()
-        refs = [ctypes.byref(f) for f in flags] + [ctypes.byref(last)]
-        self._step_refs = (flags, last, refs)  # keep alive
-        raw = self.do_step_raw
+        p1, p2, p3 = (ctypes.addressof(f) for f in flags)
+        p4 = ctypes.addressof(last)
+        self._step_out = (flags, last)  # keep the out-values alive
+        raw, c = self.do_step_raw, component
 
         def step(t, h, no_set_prior):
-            return raw(comp, t, h, bool(no_set_prior), *refs)
+            return raw(c, t, h, no_set_prior, p1, p2, p3, p4)
 
         self.step = step
         self.names = ("fmi3GetFloat64", "fmi3SetFloat64", "fmi3DoStep")

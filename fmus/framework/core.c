@@ -80,7 +80,7 @@ static void setDefaults(ModelInstance *comp) {
 }
 
 /* A new instance, or NULL (out of memory). */
-static ModelInstance *core_new(const char *instanceName, LogSink sink, void *logger, void *environment,
+static ModelInstance *core_new(const char *instanceName, LogSink sink, AnyFunction logger, void *environment,
                                int loggingOn) {
     ModelInstance *comp = (ModelInstance *)calloc(1, sizeof(ModelInstance));
     if (!comp) return NULL;

@@ -83,7 +83,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     tmp.instanceName = (char *)(instanceName ? instanceName : "?");
     if (functions && functions->logger) {
         tmp.sink = fmi2Sink;
-        tmp.logger = (void *)functions->logger;
+        tmp.logger = (AnyFunction)functions->logger;
         tmp.environment = functions->componentEnvironment;
     }
     if (!instanceName || !*instanceName) {

@@ -66,7 +66,7 @@ static ModelInstance *instantiate(const char *f, fmi3String instanceName, fmi3St
     tmp.instanceName = (char *)(instanceName ? instanceName : "?");
     if (logMessage) {
         tmp.sink = fmi3Sink;
-        tmp.logger = (void *)logMessage;
+        tmp.logger = (AnyFunction)logMessage;
         tmp.environment = env;
     }
     if (!instanceName || !*instanceName) {

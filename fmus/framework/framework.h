@@ -48,13 +48,16 @@ typedef struct {
 
 typedef struct ModelInstance ModelInstance;
 
+/* Any function pointer (ISO C converts between function pointer types, not to void *). */
+typedef void (*AnyFunction)(void);
+
 /* Passes one finished message to the importer's logger (set by the FMI front end). */
 typedef void (*LogSink)(ModelInstance *comp, int isError, const char *category, const char *message);
 
 struct ModelInstance {
     char *instanceName;
     LogSink sink;          /* NULL: the importer gave no logger */
-    void *logger;          /* the importer's callback, called by sink only */
+    AnyFunction logger;    /* the importer's callback, called by sink only */
     void *environment;     /* its componentEnvironment / instanceEnvironment */
     int loggingOn;
     Snapshot s;

@@ -206,5 +206,25 @@ def test_contract_error_suggests_near_names(swap, variant, near):
         with pytest.raises(ContractError) as info:
             Plant(swap(variant))
     msg = str(info.value)
-    assert f"missing variable theta[1] (output, Real, rad)" in msg
+    assert "missing variable theta[1] (output, Real, rad)" in msg
     assert f"the plant has {near}" in msg
+
+
+def test_fmi3_array_variable_is_named_in_the_refusal(fmu3, tmp_path):
+    """An FMI 3.0 plant with one array variable theta instead of theta[1], theta[2]."""
+    import re
+    bad = tmp_path / "array.fmu"
+    with zipfile.ZipFile(fmu3) as zin, zipfile.ZipFile(bad, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                text = data.decode().replace('name="theta[1]"', 'name="theta"')
+                text = re.sub(r'\s*<Float64 name="theta\[2\]"[^>]*/>', "", text)
+                text = re.sub(r'\s*<(Output|InitialUnknown) valueReference="49"/>', "", text)
+                data = text.encode()
+            zout.writestr(item, data)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PlantWarning)
+        with pytest.raises(ContractError, match=r"missing variable theta\[1\] \(output, Float64, "
+                                                r"rad\).*the plant has theta\b[^_]"):
+            Plant(bad)

@@ -182,12 +182,23 @@ def test_guid_with_percent_signs_is_logged_as_text(fmu_path):
     assert "refused:" in proc.stdout
 
 
-def test_percent_signs_reach_a_plain_logger_escaped(make_slave, fmu_path):
-    """A logger that does not format receives '%%' for '%' (the FMI 2.0 message is a format)."""
-    slave, log = make_slave(name="a%sb")
-    slave.setupExperiment(startTime=0.0)
-    slave.enterInitializationMode()
-    slave.exitInitializationMode()
-    with pytest.raises(FMICallException):
-        slave.doStep(0.5, 1e-3)
-    assert all("%" not in m.replace("%%", "") for m in log.messages())
+def test_percent_signs_reach_a_plain_logger_escaped(unzipdir):
+    """A logger that does not format receives '%%' for each '%' (the FMI 2.0 message is a
+    printf format), and nothing else changes."""
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                           fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+    from .conftest import LogCapture
+
+    log = LogCapture()
+    slave = FMU2Slave(guid="{100%s-%n}", unzipDirectory=unzipdir, modelIdentifier="ArmExoPlant",
+                      instanceName="plant")
+    cb = fmi2CallbackFunctions()
+    cb.logger = fmi2CallbackLoggerTYPE(log)
+    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    with pytest.raises(Exception):
+        slave.instantiate(loggingOn=False, callbacks=cb)
+    assert len(log.messages()) == 1
+    assert log.messages()[0].startswith("fmi2Instantiate: wrong GUID {100%%s-%%n}, expected {")
