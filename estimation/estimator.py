@@ -29,7 +29,7 @@ Spectral conventions are those of :mod:`estimation.spectral` (Table IV by defaul
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -203,6 +203,21 @@ def estimate_impedance(trials, *, method="decomposition", band_hz=BAND_HZ,
                              n_segments=nseg, trials=[t.name for t in trials])
 
 
+def as_method(estimate: ImpedanceEstimate, method: str) -> ImpedanceEstimate:
+    """The ``decomposition`` estimate from a ``full`` one or back: both use the same
+    per-joint responses P and T, only Z differs (T/R_kk or T P^-1); no spectra recomputed."""
+    pair = ("decomposition", "full")
+    if estimate.method not in pair or method not in pair:
+        raise EstimationError(f"only {pair} share their spectra; got {estimate.method!r} -> "
+                              f"{method!r}")
+    if method == "decomposition":
+        Z = estimate.T / np.diagonal(estimate.P, axis1=1, axis2=2)[:, None, :]
+    else:
+        Z = np.linalg.solve(np.swapaxes(estimate.P, 1, 2),
+                            np.swapaxes(estimate.T, 1, 2)).swapaxes(1, 2)
+    return replace(estimate, Z=Z, method=method)
+
+
 def _common_rate_and_size(trials) -> tuple[float, int]:
     fs, n = trials[0].fs, trials[0].n_dof
     for t in trials[1:]:
@@ -221,10 +236,10 @@ def _pooled(trials, fs, options, x_of, y_of, leak_of=None):
     total, acc, nan_shape = 0, None, None
     for trial in trials:
         x, y = x_of(trial), y_of(trial)
-        kw = dict(fs=fs, **options.__dict__)
-        f, gxx = spectral.cross_spectrum(x, x, **kw)
-        _, gxy = spectral.cross_spectrum(x, y, **kw)
-        _, gyy = spectral.auto_spectrum(y, **kw)
+        p = x.shape[1]
+        f, G = spectral.spectral_matrix(np.hstack([x, y]), fs=fs, **options.__dict__)
+        gxx, gxy = G[:, :p, :p], G[:, :p, p:]
+        gyy = np.real(np.diagonal(G[:, p:, p:], axis1=1, axis2=2))
         w = options.n_segments(x.shape[0])
         parts = [w * gxx, w * gxy, w * gyy]
         if leak_of is not None and (options.window != "hann" or options.detrend != "constant"):
@@ -233,7 +248,7 @@ def _pooled(trials, fs, options, x_of, y_of, leak_of=None):
         if leak_of is not None:
             _, _, g1, g2 = spectral.window_derivative_spectra(
                 x, leak_of(trial), fs=fs, nperseg=options.nperseg,
-                noverlap=options.noverlap, nfft=options.nfft)
+                noverlap=options.noverlap, nfft=options.nfft, with_plain=False)
             parts += [w * g1, w * g2]
         acc = parts if acc is None else [a + p for a, p in zip(acc, parts)]
         total += w

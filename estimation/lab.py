@@ -212,7 +212,8 @@ def estimation_units(trials, *, pool=False) -> list[Unit]:
             units.append(Unit(base or "pooled", group, why))
         elif all(len(v) == 1 for v in by_joint.values()):
             units.append(Unit(base or _joined(group), group,
-                              "one trial per perturbed joint"))
+                              "one trial per perturbed joint" if len(group) > 1
+                              else "single recording"))
         elif group[0].n_dof == 1 or all(k is None for k in by_joint):
             units += [Unit(t.name, [t], "unlabelled recording, estimated alone")
                       for t in group]

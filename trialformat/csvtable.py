@@ -76,8 +76,23 @@ def read_columns(path: Path, header: list[str], delimiter: str,
 
 
 def _as_float(column) -> np.ndarray:
-    arr = column.to_numpy()
-    return np.asarray(arr, dtype=float)  # nulls (blank cells) become NaN
+    """float64 copy of a pyarrow column, nulls (blank cells) as NaN.
+
+    Read from the Arrow buffers directly: pyarrow's own ``to_numpy`` imports pandas
+    (0.3 s per process) for columns with nulls.
+    """
+    parts = []
+    for chunk in column.chunks:
+        if not pa.types.is_float64(chunk.type):
+            chunk = chunk.cast(pa.float64())
+        data = np.frombuffer(chunk.buffers()[1], dtype=np.float64, count=len(chunk),
+                             offset=chunk.offset * 8).copy()
+        if chunk.null_count:
+            valid = np.unpackbits(np.frombuffer(chunk.buffers()[0], dtype=np.uint8),
+                                  bitorder="little")[chunk.offset:chunk.offset + len(chunk)]
+            data[valid == 0] = np.nan
+        parts.append(data)
+    return np.concatenate(parts) if parts else np.empty(0)
 
 
 def _locate_error(path, header, delimiter, numeric, exc) -> None:
@@ -105,10 +120,15 @@ def _locate_error(path, header, delimiter, numeric, exc) -> None:
 
 
 def to_text(header: list[str], table: np.ndarray) -> bytes:
-    """The project's own writing: plain CSV, ``,`` separator, 17 significant digits."""
-    row = ",".join(["%.17g"] * table.shape[1]) + "\n"
-    body = (row * table.shape[0]) % tuple(table.ravel().tolist())
-    out = io.StringIO()
-    out.write(",".join(header) + "\n")
-    out.write(body)
-    return out.getvalue().encode()
+    """The project's own writing: plain CSV, ``,`` separator, unquoted header.
+
+    Values in the shortest text that reads back to the same double (pyarrow's writer),
+    so a trial read back is bit-identical; about 4x faster than ``%.17g`` formatting.
+    """
+    columns = {f"c{i}": np.ascontiguousarray(table[:, i], dtype=float)
+               for i in range(table.shape[1])}
+    buf = io.BytesIO()
+    pacsv.write_csv(pa.table(columns), buf,
+                    write_options=pacsv.WriteOptions(include_header=False,
+                                                     quoting_style="none"))
+    return (",".join(header) + "\n").encode() + buf.getvalue()

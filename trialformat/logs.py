@@ -143,7 +143,8 @@ def required_columns(meta: dict) -> list[str]:
 def write_trial(stem: str | os.PathLike, trial: Trial) -> Path:
     """Write ``stem.csv`` and ``stem.json`` atomically; return the CSV path.
 
-    Values are written with 17 significant digits, so a trial read back is bit-identical;
+    Values are written in their shortest round-trip form, so a trial read back is
+    bit-identical;
     the sign and angle conventions the metadata declare are restored on writing. The
     files get the user's umask (as ``open`` would), not the private mode of a temp file.
     """
@@ -308,6 +309,9 @@ def complete_metadata(meta: dict, where) -> list[str]:
                                f"got {n_dof!r}")
     defaults = default_metadata(n_dof)
     defaults["perturbed_dof"] = None
+    if isinstance(meta.get("perturbation"), dict) and \
+            meta["perturbation"].get("kind") == "position":
+        del defaults["perturbation"]  # the torque perturbation's keys do not apply
     filled = []
     for key, value in defaults.items():
         if key not in meta:

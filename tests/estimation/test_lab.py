@@ -185,3 +185,18 @@ def test_failed_figures_leave_no_partial_report(ankle_folder, tmp_path, monkeypa
     with pytest.raises(RuntimeError):
         main(["figures", str(ankle_folder), "--out", str(out)])
     assert [p.name for p in out.iterdir()] == ["old.txt"]
+
+
+def test_worked_example_ankle(tmp_path, capsys):
+    """docs/estimation.md's example: lab-style files (7 digits, t with 6 decimals, torque
+    sign -1), two labelled conditions and an unlabelled recording without reference."""
+    from estimation.examples import ANKLE_CONDITIONS, main as examples_main
+    assert examples_main(["ankle", str(tmp_path / "ankle")]) == 0
+    out = tmp_path / "est.json"
+    assert main(["estimate", str(tmp_path / "ankle"), "--json", str(out)]) == 0
+    results = {r["label"]: r for r in json.loads(out.read_text())}
+    assert set(results) == {"relaxed", "co-contracted", "relaxed_noref"}
+    assert len(results["relaxed"]["trials"]) == 2
+    for label, r in results.items():
+        limb = ANKLE_CONDITIONS[label.replace("_noref", "")]
+        _check_1dof(r, **limb)

@@ -405,7 +405,7 @@ def test_position_perturbation_trial(tmp_path):
     meta = metadata(n_dof=1, perturbation={"kind": "position", "level": 1},
                     sensors={"torque_sign": -1, "torque_sampling": "instantaneous"})
     write_json(tmp_path / "p", meta)
-    with pytest.warns(UserWarning, match="perturbation.peak"):
+    with pytest.warns(UserWarning, match="sensors.encoder_resolution_deg"):
         trial = tf.read_trial(tmp_path / "p.csv")
     assert trial.perturbation_kind == "position" and trial.tau_delta is None
     np.testing.assert_array_equal(trial.theta_ref[:, 0], cols["theta_ref[1]"])
