@@ -402,7 +402,8 @@ def _execute(tasks, trials_dir, plants, workers):
 
 
 def table_markdown(rows) -> str:
-    cols = ("n", "plant", "total_s", "estimator", "trial_s", "frfs_together", "cond_max",
+    cols = ("n", "plant", "total_s", "estimator", "trial_s", "n_segments", "frfs_together",
+            "cond_max",
             "vaf_matrix", "vaf_min", "err_M", "err_B", "err_K", "coh_min", "compute_s")
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
@@ -428,7 +429,8 @@ def table_markdown(rows) -> str:
                 vals.append(str(v))
         lines.append("| " + " | ".join(vals) + " |")
     legend = ("\nPer n, plant and total experiment time T: the decomposition runs n trials "
-              "of T/n (trial_s), the MIMO methods one trial of T. vaf_matrix [%]: VAF of the whole "
+              "of T/n (trial_s), the MIMO methods one trial of T; n_segments: Welch segments of 8192 "
+              "samples per trial (one segment: no averaging, coherence 1 by construction). vaf_matrix [%]: VAF of the whole "
               "matrix (every element and bin); vaf_min [%]: worst element; "
               "err_M/B/K [%]: largest error of every element, off-diagonal relative to "
               "sqrt(X_ii X_kk); coh_min: worst band-mean coherence; cond_max: largest "
@@ -445,11 +447,11 @@ def figure(rows, path: Path) -> None:
 
     done = [r for r in rows if r.get("status") == "done"]
     totals = sorted({r["total_s"] for r in done})
-    panels = (("vaf_matrix", "VAF of Z [%]", False), ("err_K", "worst K error [%]", True),
-              ("err_B", "worst B error [%]", True), ("cond_max", "max cond. number", True),
-              ("coh_min", "worst coherence", False), ("compute_s", "computing time [s]", True))
-    fig, axes = plt.subplots(len(totals) or 1, len(panels), figsize=(22, 3.4 * max(len(totals), 1)),
-                             squeeze=False)
+    panels = (("vaf_matrix", "VAF of Z [%]", False), ("err_M", "worst M error [%]", True),
+              ("err_B", "worst B error [%]", True), ("err_K", "worst K error [%]", True),
+              ("cond_max", "max cond. number", True), ("compute_s", "computing time [s]", True))
+    fig, axes = plt.subplots(len(totals) or 1, len(panels),
+                             figsize=(18, 2.8 * max(len(totals), 1) + 0.6), squeeze=False)
     styles = {"decomposition T/R": "o-", "decomposition T P^-1": "s-",
               "MIMO closed loop": "^--", "MIMO direct": "v--"}
     for a, total in enumerate(totals):
@@ -458,8 +460,10 @@ def figure(rows, path: Path) -> None:
                           and not (r["n"] == 3 and r["plant"] == "linear")),
                          key=lambda r: r["n"])
             for ax, (key, ylabel, log) in zip(axes[a], panels):
-                ax.plot([r["n"] for r in sel], [r[key] for r in sel], styles[label],
-                        label=label, ms=4)
+                y = [r[key] for r in sel]
+                if key == "vaf_matrix":  # a failed estimate (VAF << 0) at the axis floor
+                    y = [max(v, 90.0) for v in y]
+                ax.plot([r["n"] for r in sel], y, styles[label], label=label, ms=4)
                 if log:
                     ax.set_yscale("log")
                 ax.set_ylabel(ylabel)
@@ -470,15 +474,18 @@ def figure(rows, path: Path) -> None:
                  "at equal total experiment time T; n = 2, 3 C FMU, n >= 4 linear plant")
     fig.tight_layout()
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.png")
-    fig.savefig(tmp, dpi=110)
+    fig.savefig(tmp, dpi=65)
     plt.close(fig)
     os.replace(tmp, path)
 
 
 def _atomic(path: Path, text: str) -> None:
+    from trialformat.logs import current_umask
+
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     with os.fdopen(fd, "w", encoding="utf-8") as fh:
         fh.write(text)
+    os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp's 0600 -> the user's umask
     os.replace(tmp, path)
 
 

@@ -141,3 +141,34 @@ def test_chain_of_the_tractability_study():
     np.testing.assert_allclose(tr.chain_robot(3)[0], spec, rtol=1e-12)
     from orchestrator.plants import linear_arm
     np.testing.assert_allclose(tr.chain_robot(2)[0], linear_arm._M_R, rtol=1e-9)
+
+
+def test_study_tasks_are_at_equal_total_time():
+    """Per (n, plant, T): n decomposition trials of T/n and one all-joints trial of T."""
+    tasks = tr.study_tasks(ns=(2, 3, 5), totals_s=(70.0,))
+    kinds = {(t["n"], t["plant"]) for t in tasks}
+    assert kinds == {(2, "fmu"), (3, "fmu"), (3, "linear"), (5, "linear")}
+    for n, plant in kinds:
+        sel = [t for t in tasks if (t["n"], t["plant"]) == (n, plant)]
+        dec = [t for t in sel if t["perturbed_dof"] is not None]
+        mimo = [t for t in sel if t["perturbed_dof"] is None]
+        assert sorted(t["perturbed_dof"] for t in dec) == list(range(1, n + 1))
+        assert sum(t["duration_s"] for t in dec) == pytest.approx(70.0)
+        assert [t["duration_s"] for t in mimo] == [70.0]
+    assert len({t["name"] for t in tasks}) == len(tasks)
+    assert tr.frfs_together("closed_loop", 7) == "98 (MIMO)"
+    with pytest.raises(SetupError, match="n in 2..7"):
+        tr.run_tractability("unused", ns=(8,))
+
+
+@pytest.mark.slow
+def test_tractability_quick_run(tmp_path):
+    """``armimp tractability --quick``: n = 2, 3, 4 at T = 70 s, every estimator scored."""
+    assert main(["tractability", "--quick", "--out", str(tmp_path), "--no-progress"]) == 0
+    result = json.loads((tmp_path / "tractability.json").read_text())
+    done = [r for r in result["rows"] if r["status"] == "done"]
+    assert len(done) == 16
+    n3 = {r["estimator"]: r for r in done if r["n"] == 3 and r["plant"] == "fmu"}
+    assert n3["decomposition T P^-1"]["vaf_matrix"] > 99.9
+    assert n3["decomposition T/R"]["cond_max"] == 1.0
+    assert (tmp_path / "fig_tractability.png").stat().st_size > 0
