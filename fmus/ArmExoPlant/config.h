@@ -107,6 +107,7 @@ typedef struct {
     int i_th, i_w, i_z[N_JOINTS], i_ta, i_qm[N_JOINTS], i_wm[N_JOINTS], i_thh, i_wh, i_y;
     int basic;                      /* rigid transmission and cuff, no lags */
     double Ac[N_JOINTS][N_JOINTS];  /* M_h + diag(Jm): constant part of the fast path's matrix */
+    double a1n, a2n, a3n;           /* sum of d_aa from a = 1, 2, n (reference-3dof.md's a1, a2, a3 for n = 3) */
 
     /* sin/cos of the relative joint angles q_2..q_n at the start of the RK4 step */
     double q_ref[N_JOINTS], s_ref[N_JOINTS], c_ref[N_JOINTS];

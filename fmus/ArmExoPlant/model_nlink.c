@@ -278,6 +278,10 @@ int model_initialize(ModelInstance *comp) {
     for (j = 0; j < NJ; j++) d->basic = d->basic && !d->trans[j];
     for (i = 0; i < NJ; i++)  /* constant part of M_r + M_h of the fast path */
         for (j = 0; j < NJ; j++) d->Ac[i][j] = d->Mh[i][j] + (i == j ? d->Jm[i] : 0.0);
+    d->a1n = d->a2n = d->a3n = 0.0;
+    for (i = 0; i < NJ; i++) d->a1n += d->d[i][i];
+    for (i = 1; i < NJ; i++) d->a2n += d->d[i][i];
+    d->a3n = d->d[NJ - 1][NJ - 1];
 
     /* --- state layout; the fast path has [th, w, z] at 0 .. 3n-1 --- */
     d->i_th = n; n += NJ;
@@ -466,6 +470,64 @@ __attribute__((always_inline)) static inline void deriv_general(const ModelData 
     evaluate(d, x, dx, NULL);
 }
 
+/* sin/cos of joint j (1-based j+1) at th + q0, rotated from the step start's by the
+ * Taylor series (as sincos_q2 of the two-link model.c). */
+__attribute__((always_inline)) static inline void rotated(const ModelData *d, int j, double th, double *s, double *c) {
+    const double e = th + d->q0[j] - d->q_ref[j];
+    if (fabs(e) < 1e-4) {
+        const double e2 = e * e;
+        const double se = e - e * e2 * (1.0 / 6.0), ce = 1.0 - 0.5 * e2;
+        *s = d->s_ref[j] * ce + d->c_ref[j] * se;
+        *c = d->c_ref[j] * ce - d->s_ref[j] * se;
+    } else {
+        *s = sin(th + d->q0[j]);
+        *c = cos(th + d->q0[j]);
+    }
+}
+
+#if NJ == 3
+/* Fast path (d->basic), three links written out: x = [theta, w, z]; M_r(q) in
+ * reference-3dof.md's form (a1 = d11 + d22 + d33, a2 = d22 + d33, a3 = d33, b12 = d12,
+ * b13 = d13, b23 = d23), Coriolis from evaluate()'s sums with S01 = sin q2, S02 =
+ * sin(q2 + q3), S12 = sin q3.  Same equations as evaluate() without the effects. */
+__attribute__((always_inline)) static inline void deriv_basic(const ModelData *d, const double *x, double *dx) {
+    const double th1 = x[0], th2 = x[1], th3 = x[2], w1 = x[3], w2 = x[4], w3 = x[5];
+    double s2, c2, s3, c3, zd, f[3], A[3][3];
+    rotated(d, 1, th2, &s2, &c2);
+    rotated(d, 2, th3, &s3, &c3);
+    const double c23 = c2 * c3 - s2 * s3, s23 = s2 * c3 + c2 * s3;
+    for (int j = 0; j < 3; j++) {
+        f[j] = d->u[j] - (d->Bh[j][0] * w1 + d->Bh[j][1] * w2 + d->Bh[j][2] * w3
+                          + d->Kh[j][0] * th1 + d->Kh[j][1] * th2 + d->Kh[j][2] * th3);
+        if (d->friction[j]) { f[j] -= friction(d, j, x[3 + j], x[6 + j], &zd); dx[6 + j] = zd; }
+        else dx[6 + j] = 0.0;
+    }
+    {
+        const double b12 = d->d[0][1], b13 = d->d[0][2], b23 = d->d[1][2];
+        const double p1 = w1, p2 = w1 + w2, p3 = p2 + w3;
+        const double P1 = p1 * p1, P2 = p2 * p2, P3 = p3 * p3;
+        const double q3 = b13 * s23 * P1 + b23 * s3 * P2;
+        const double q2 = b12 * s2 * P1 - b23 * s3 * P3 + q3;
+        const double q1 = -b12 * s2 * P2 - b13 * s23 * P3 + q2;
+        f[0] -= q1; f[1] -= q2; f[2] -= q3;
+        const double h12 = b12 * c2, h13 = b13 * c23, h23 = b23 * c3;
+        const double M13 = d->a3n + h13 + h23, M23 = d->a3n + h23;
+        const double M12 = d->a2n + h12 + h13 + 2.0 * h23, M22 = d->a2n + 2.0 * h23;
+        const double M11 = d->a1n + 2.0 * (h12 + h13 + h23);
+        A[0][0] = M11 + d->Ac[0][0]; A[0][1] = M12 + d->Ac[0][1]; A[0][2] = M13 + d->Ac[0][2];
+        A[1][0] = M12 + d->Ac[1][0]; A[1][1] = M22 + d->Ac[1][1]; A[1][2] = M23 + d->Ac[1][2];
+        A[2][0] = M13 + d->Ac[2][0]; A[2][1] = M23 + d->Ac[2][1]; A[2][2] = d->a3n + d->Ac[2][2];
+    }
+    if (d->has_gravity) {
+        double phi = 0.0, acc = 0.0, qg[NJ];
+        for (int a = 0; a < NJ; a++) { phi += d->q0[a] + x[a]; qg[a] = d->gq[a] * cos(phi); }
+        for (int j = NJ - 1; j >= 0; j--) { acc += qg[j]; f[j] -= acc; }
+    }
+    solve(A, f);
+    dx[0] = w1; dx[1] = w2; dx[2] = w3;
+    dx[3] = f[0]; dx[4] = f[1]; dx[5] = f[2];
+}
+#else
 /* Fast path (d->basic): x = [theta, w, z], rigid transmission and cuff, no lags; the same
  * equations as evaluate() without the effects and without tau_h. */
 __attribute__((always_inline)) static inline void deriv_basic(const ModelData *d, const double *x, double *dx) {
@@ -515,6 +577,8 @@ __attribute__((always_inline)) static inline void deriv_basic(const ModelData *d
     solve(A, f);
     for (j = 0; j < NJ; j++) { dx[j] = w[j]; dx[NJ + j] = f[j]; }
 }
+
+#endif
 
 RK4_DEFINE(rk4_basic, 3 * NJ, 3 * NJ, deriv_basic)
 RK4_DEFINE(rk4_general, NX_MAX, s->nx, deriv_general)
