@@ -68,7 +68,7 @@ def main(argv=None):
                 "meta": json.dumps(trial.meta)}
         hdf5storage.savemat(str(tmp / "m73.mat"), data, format="7.3",
                             store_python_metadata=False, matlab_compatible=True)
-        rows["read_trial, project CSV (17 digits)"] = best_of(lambda: tf.read_trial(plain))
+        rows["read_trial, project CSV (round-trip digits)"] = best_of(lambda: tf.read_trial(plain))
         rows["previous reader (np.loadtxt), same file"] = best_of(
             lambda: previous_reader(plain), 5)
         rows["read_trial, pandas %.7g"] = best_of(lambda: tf.read_trial(tmp / "p7.csv"))
@@ -77,7 +77,7 @@ def main(argv=None):
         rows["read_trial, .mat v5 (compressed)"] = best_of(lambda: tf.read_trial(mat5))
         rows["read_trial, .mat v7.3 (HDF5)"] = best_of(lambda: tf.read_trial(tmp / "m73.mat"))
     ratio = rows["previous reader (np.loadtxt), same file"][1] / \
-        rows["read_trial, project CSV (17 digits)"][1]
+        rows["read_trial, project CSV (round-trip digits)"][1]
     print(f"one 50 s trial, 1 kHz, 2 joints ({trial.n_samples} rows x 9 columns)")
     print(f"{'reader':45s} {'best ms':>8s} {'median ms':>10s}")
     for name, (best, med) in rows.items():

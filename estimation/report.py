@@ -26,6 +26,7 @@ import os
 import shutil
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
+import multiprocessing
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -103,42 +104,68 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
     if not paths:
         raise EstimationError(f"no trial (NAME.csv or NAME.mat) in {[str(f) for f in folders]}")
     tasks = _condition_tasks(paths, arm, variants)
-    results = _run_tasks(tasks, workers, progress)
-    groups = {task["condition"]: task["names"] for task in tasks}
-    rows, skipped, curves = [], [], {}
-    for res in results:
-        rows += res["rows"]
-        skipped += res["skipped"]
-        if res["curves"]:
-            curves[res["condition"]] = res["curves"]
-    if not rows:
-        raise EstimationError(f"no condition could be estimated: {skipped}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    pool = _pool(workers, len(tasks))
     try:
-        summary = summarize(rows)
-        files = [_write_rows(tmp / "table_conditions.csv", rows),
-                 _atomic_text(tmp / "table_conditions.md", conditions_markdown(rows, arm)),
-                 *parameter_tables(rows, arm, tmp),
-                 _write_rows(tmp / "table_summary.csv", summary),
-                 _atomic_text(tmp / "table_summary.md", summary_markdown(summary, arm))]
-        files.append(_save(fig2(curves, arm, variants), tmp / "fig2_impedance.png"))
+        results = _run_tasks(tasks, pool, progress)
+        groups = {task["condition"]: task["names"] for task in tasks}
+        rows, skipped, curves = [], [], {}
+        for res in results:
+            rows += res["rows"]
+            skipped += res["skipped"]
+            if res["curves"]:
+                curves[res["condition"]] = res["curves"]
+        if not rows:
+            raise EstimationError(f"no condition could be estimated: {skipped}")
+        figures = [("fig2_impedance.png", "fig2", (curves, arm, variants))]
         for name in variants:
             suffix = "" if name == variant else f"_{name}"
-            files.append(_save(fig3(rows, name), tmp / f"fig3_accuracy{suffix}.png"))
-            files.append(_save(fig4(rows, name), tmp / f"fig4_coherence{suffix}.png"))
-        report = {"folders": [Path(f).name for f in folders], "truth": truth,
-                  "variant_in_figures": variant, "compared_variant": compare,
-                  "n_trials": len(paths), "n_conditions": len(groups), "skipped": skipped,
-                  "summary": summary, "rows": rows}
-        files.append(_atomic_text(tmp / "report.json", json.dumps(report, indent=1)))
-        os.chmod(tmp, 0o777 & ~current_umask())
-        _replace_dir(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+            figures += [(f"fig3_accuracy{suffix}.png", "fig3", (rows, name)),
+                        (f"fig4_coherence{suffix}.png", "fig4", (rows, name))]
+        pngs = [pool.submit(render_png, kind, args) if pool else render_png(kind, args)
+                for _, kind, args in figures]
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+        try:
+            files = _write_report(tmp, rows, skipped, arm, folders, truth, variant, compare,
+                                  paths, groups)
+            for (name, *_), png in zip(figures, pngs):
+                files.append(_atomic_bytes(tmp / name, png.result() if pool else png))
+            os.chmod(tmp, 0o777 & ~current_umask())
+            _replace_dir(tmp, out)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+    finally:
+        if pool:
+            pool.shutdown()
+    summary = summarize(rows)
     return {"rows": rows, "summary": summary, "skipped": skipped,
             "files": [str(out / Path(f).name) for f in files]}
+
+
+def _write_report(tmp, rows, skipped, arm, folders, truth, variant, compare, paths, groups):
+    """The tables and report.json into ``tmp``; returns the paths."""
+    summary = summarize(rows)
+    files = [_write_rows(tmp / "table_conditions.csv", rows),
+             _atomic_text(tmp / "table_conditions.md", conditions_markdown(rows, arm)),
+             *parameter_tables(rows, arm, tmp),
+             _write_rows(tmp / "table_summary.csv", summary),
+             _atomic_text(tmp / "table_summary.md", summary_markdown(summary, arm))]
+    report = {"folders": [Path(f).name for f in folders], "truth": truth,
+              "variant_in_figures": variant, "compared_variant": compare,
+              "n_trials": len(paths), "n_conditions": len(groups), "skipped": skipped,
+              "summary": summary, "rows": rows}
+    files.append(_atomic_text(tmp / "report.json", json.dumps(report, indent=1)))
+    return files
+
+
+def render_png(kind, args) -> bytes:
+    """One report figure as PNG bytes (run in a worker process)."""
+    fig = {"fig2": fig2, "fig3": fig3, "fig4": fig4}[kind](*args)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return buf.getvalue()
 
 
 class _MetaOnly:
@@ -179,22 +206,24 @@ def _condition_tasks(paths, arm, variants) -> list[dict]:
 PROCESS_MIN_TASKS = 4
 
 
-def _run_tasks(tasks, workers, progress) -> list[dict]:
+def _pool(workers, n_tasks):
+    """Worker processes for the report, or None when they would not pay."""
+    if workers is None or workers <= 1 or n_tasks < 2 * PROCESS_MIN_TASKS:
+        return None
+    # fork: no re-import per worker; the main process holds no threads or FMU here
+    methods = multiprocessing.get_all_start_methods()
+    ctx = get_context("fork" if "fork" in methods else "spawn")
+    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+
+
+def _run_tasks(tasks, pool, progress) -> list[dict]:
     bar = tqdm(total=len(tasks), desc="estimating conditions", disable=not progress)
     try:
-        if workers is None or workers <= 1 or len(tasks) < 2 * PROCESS_MIN_TASKS:
-            out = []
-            for t in tasks:
-                out.append(score_condition(t))
-                bar.update()
-            return out
-        ctx = get_context("spawn")  # clean workers: no inherited threads or FMU state
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
-            out = []
-            for res in ex.map(score_condition, tasks):
-                out.append(res)
-                bar.update()
-            return out
+        out = []
+        for res in (pool.map(score_condition, tasks) if pool else map(score_condition, tasks)):
+            out.append(res)
+            bar.update()
+        return out
     finally:
         bar.close()
 

@@ -77,8 +77,13 @@ class Trial:
 
     @property
     def perturbed_dof(self) -> int | None:
-        """1-based perturbed joint, or None when all joints are perturbed at once."""
+        """1-based perturbed joint, or None when all joints are perturbed at once.
+
+        A one-joint trial's perturbed joint is joint 1, declared or not.
+        """
         k = self.meta.get("perturbed_dof")
+        if k is None and int(self.meta.get("n_dof", 2)) == 1:
+            return 1
         return None if k is None else int(k)
 
     @property
@@ -478,5 +483,8 @@ def _check_perturbation(trial: Trial, where) -> None:
     else:
         name = "tau_delta"
     if not np.any(trial.signal(name)[:, k - 1]):
+        hint = (" (a position perturbation? declare \"perturbation\": {\"kind\": "
+                "\"position\"} and give theta_ref[k] if it was recorded)"
+                if name == "tau_delta" else "")
         raise TrialFormatError(f"{where}: column '{name}[{k}]' is identically zero for "
-                               f"the perturbed joint {k}")
+                               f"the perturbed joint {k}{hint}")

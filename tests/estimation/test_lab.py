@@ -200,3 +200,14 @@ def test_worked_example_ankle(tmp_path, capsys):
     for label, r in results.items():
         limb = ANKLE_CONDITIONS[label.replace("_noref", "")]
         _check_1dof(r, **limb)
+
+
+def test_reports_get_the_umask(ankle_folder, tmp_path):
+    import os
+    old = os.umask(0o022)
+    try:
+        assert main(["figures", str(ankle_folder), "--out", str(tmp_path / "rep")]) == 0
+        assert (tmp_path / "rep").stat().st_mode & 0o777 == 0o755
+        assert all(p.stat().st_mode & 0o777 == 0o644 for p in (tmp_path / "rep").iterdir())
+    finally:
+        os.umask(old)

@@ -417,3 +417,19 @@ def test_position_perturbation_trial(tmp_path):
     w_pandas_kw()(tmp_path / "p", cols)
     with pytest.raises(TrialFormatError, match=r"theta_ref\[1\].*identically zero"):
         tf.read_trial(tmp_path / "p.csv")
+
+
+def test_absolute_angles_become_deviations(tmp_path):
+    cols = values()
+    posture = np.deg2rad([62.708, 77.26])
+    absolute = dict(cols)
+    for j in (1, 2):
+        absolute[f"theta[{j}]"] = cols[f"theta[{j}]"] + posture[j - 1]
+    w_pandas_kw()(tmp_path / "a", absolute)
+    write_json(tmp_path / "a", metadata(angles="absolute", posture_deg=[62.708, 77.26]))
+    trial = tf.read_trial(tmp_path / "a.csv")
+    expected = np.column_stack([absolute["theta[1]"], absolute["theta[2]"]]) - posture
+    np.testing.assert_array_equal(trial.theta, expected)
+    tf.write_trial(tmp_path / "b", trial)  # written back in the file's convention
+    back = pd.read_csv(tmp_path / "b.csv")
+    np.testing.assert_allclose(back["theta[1]"], absolute["theta[1]"], rtol=0, atol=1e-15)
