@@ -172,3 +172,18 @@ def test_tractability_quick_run(tmp_path):
     assert n3["decomposition T P^-1"]["vaf_matrix"] > 99.9
     assert n3["decomposition T/R"]["cond_max"] == 1.0
     assert (tmp_path / "fig_tractability.png").stat().st_size > 0
+
+
+def test_fmu_defaults_equal_the_3dof_reference():
+    """The three-link FMU's defaults (fmus/variables.py) and trialformat's
+    reference-3dof.json are the same numbers: every parameter the 3-joint Setup declares."""
+    fmus_variables = pytest.importorskip("fmus.variables")
+    starts = {v.name: v.start for v in fmus_variables.table(3).variables
+              if v.causality == "parameter"}
+    declared = Setup.reference(0, 0, arm="3dof").plant_parameters()
+    assert set(declared) <= set(starts)
+    assert {k: declared[k] for k in declared} == pytest.approx({k: starts[k] for k in declared})
+    for level in range(4):
+        fric = Setup.reference(level, 0, arm="3dof").plant_parameters()
+        expected = fmus_variables.friction_parameters(level, 3)
+        assert {k: fric[k] for k in expected} == pytest.approx(expected)
