@@ -9,8 +9,11 @@ estimates (1 = intervals as wide as the scatter says). Cases:
 - ``position_ref``: 1-DOF ankle-like limb (K 150 N m/rad, B 1.5 N m s/rad, I 0.015 kg m^2)
   on a position servo, reference recorded (estimation.synthetic.position_trial);
 - ``position_direct``: the same without the reference (direct angle -> torque);
+- ``torque_exact``: the same limb under a torque perturbation (3 N m rms to 15 Hz, the
+  subject's own torque 0.5 N m rms), generated exactly in the frequency domain
+  (estimation.synthetic.torque_trial);
 - ``torque``: the same limb under a torque perturbation (scipy.signal.lsim closed loop,
-  encoder noise 2e-5 rad, torque noise 0.1 N m).
+  encoder noise 2e-5 rad, torque noise 0.1 N m, no own torque).
 
 Usage: ``python bench/bench_coverage.py [SEEDS]`` (default 200; ~3 min on 2 cores).
 Prints a table and writes bench/results/coverage.json.
@@ -27,14 +30,16 @@ import numpy as np
 ANKLE = {"K": 150.0, "B": 1.5, "I": 0.015}
 ANKLE_CTRL = {"M_rd": [0.005], "B_rd": [0.5], "K_rd": [10.0], "theta_rd_deg": [0.0],
               "Mbar": [0.005], "wn": [150.0], "tuning": "ankle"}
-CASES = ("position_ref", "position_direct", "torque")
+CASES = ("position_ref", "position_direct", "torque_exact", "torque")
 
 
 def one(args):
     case, seed = args
     from estimation.lab import Unit, analyse
-    from estimation.synthetic import position_trial, synthetic_trial
-    if case == "torque":
+    from estimation.synthetic import position_trial, synthetic_trial, torque_trial
+    if case == "torque_exact":
+        trial = torque_trial(**ANKLE, seed=seed)
+    elif case == "torque":
         arm = (np.array([[ANKLE["I"]]]), np.array([[ANKLE["B"]]]), np.array([[ANKLE["K"]]]))
         trial = synthetic_trial(perturbed_dof=1, arm=arm, controller=ANKLE_CTRL, peak=[10.0],
                                 seed=seed, theta_noise_std_rad=2e-5, tau_noise_std_nm=0.1)

@@ -492,13 +492,6 @@ def _level_figure(rows, variant, panels, *, width, title):
 # ----------------------------------------------------------------------------- writing
 
 
-def _save(fig, path: Path) -> Path:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return _atomic_bytes(path, buf.getvalue())
-
-
 def _write_rows(path: Path, rows) -> Path:
     cols = []
     for r in rows:

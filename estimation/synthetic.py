@@ -191,6 +191,55 @@ CONTROLLER_3DOF = {"M_rd": [0.2, 0.05, 0.02], "B_rd": [1.0, 0.5, 0.2], "K_rd": [
 PEAK_3DOF = [9.0, 5.4, 1.8]
 
 
+def _shaped_noise(rng, f, n, rms, corner, order):
+    """Spectrum of a periodic Gaussian signal of ``rms`` with a Butterworth-like magnitude."""
+    spec = rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)
+    spec /= np.sqrt(1 + (f / corner) ** (2 * order))
+    spec[0] = 0.0
+    x = np.fft.irfft(spec, n)
+    return np.fft.rfft(x * rms / x.std())
+
+
+def torque_trial(*, K, B, I, duration_s=50.0, fs=1000.0, seed=0, perturbation_rms_nm=3.0,
+                 cutoff_hz=15.0, M_rd=0.005, B_rd=0.5, K_rd=10.0, voluntary_rms_nm=0.5,
+                 voluntary_hz=2.0, theta_noise_std_rad=2e-5, tau_noise_std_nm=0.1, name=""):
+    """A 1-DOF torque-perturbation trial generated exactly in the frequency domain.
+
+    The robot renders ``Z_a = M_rd s^2 + B_rd s + K_rd`` and adds the perturbation d; the
+    limb ``Z = I s^2 + B s + K`` adds its own torque ``tau_v``::
+
+        (Z + Z_a) theta = d + tau_v,   tau_h = Z theta - tau_v
+
+    Periodic and band-limited like :func:`position_trial`, so ``G(d, tau_h)/G(d, theta) = Z``
+    holds at every bin (no hold or aliasing error, unlike the lsim closed loop).
+    """
+    n = int(round(duration_s * fs))
+    rng = np.random.default_rng(seed)
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    s = 2j * np.pi * f
+    D = _shaped_noise(rng, f, n, perturbation_rms_nm, cutoff_hz, 8)
+    V = _shaped_noise(rng, f, n, voluntary_rms_nm, voluntary_hz, 1)
+    Z = I * s ** 2 + B * s + K
+    Za = M_rd * s ** 2 + B_rd * s + K_rd
+    Th = (D + V) / (Z + Za)
+    theta = np.fft.irfft(Th, n) + theta_noise_std_rad * rng.standard_normal(n)
+    tau_h = np.fft.irfft(Z * Th - V, n) + tau_noise_std_nm * rng.standard_normal(n)
+    meta = tf.default_metadata(1)
+    meta.update(fs=fs, n_dof=1, perturbed_dof=1, posture_deg=[0.0],
+                controller={"M_rd": [M_rd], "B_rd": [B_rd], "K_rd": [K_rd],
+                            "theta_rd_deg": [0.0], "Mbar": [M_rd], "wn": [150.0],
+                            "tuning": "custom"},
+                source="estimation.synthetic.torque_trial: 1-DOF limb under a torque "
+                       "perturbation, frequency-domain generation")
+    d = np.fft.irfft(D, n)
+    meta["perturbation"].update(level=None, rms_nm=perturbation_rms_nm, cutoff_hz=cutoff_hz,
+                                seed=seed, peak=[float(np.abs(d).max())])
+    meta["sensors"].update(torque_sampling="instantaneous")
+    return tf.Trial(meta=meta, t=np.arange(n) / fs, tau_delta=d[:, None], theta=theta[:, None],
+                    tau_h=tau_h[:, None], tau_m=(d - tau_h)[:, None],
+                    name=name or f"torque_seed{seed}")
+
+
 def position_trial(*, K, B, I, duration_s=50.0, fs=1000.0, seed=0, ref_rms_rad=0.02,
                    cutoff_hz=40.0, servo_K=5000.0, servo_B=20.0, voluntary_rms_nm=0.5,
                    voluntary_hz=2.0, theta_noise_std_rad=1e-5, tau_noise_std_nm=0.05,
@@ -230,15 +279,8 @@ def position_trial(*, K, B, I, duration_s=50.0, fs=1000.0, seed=0, ref_rms_rad=0
     f = np.fft.rfftfreq(n, 1.0 / fs)
     s = 2j * np.pi * f
 
-    def shaped(rms, corner, order):
-        spec = (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size))
-        spec /= np.sqrt(1 + (f / corner) ** (2 * order))
-        spec[0] = 0.0
-        x = np.fft.irfft(spec, n)
-        return np.fft.rfft(x * rms / x.std())
-
-    R = shaped(ref_rms_rad, cutoff_hz, 4)
-    V = shaped(voluntary_rms_nm, voluntary_hz, 1)
+    R = _shaped_noise(rng, f, n, ref_rms_rad, cutoff_hz, 4)
+    V = _shaped_noise(rng, f, n, voluntary_rms_nm, voluntary_hz, 1)
     Zs = servo_K + servo_B * s
     Z = I * s ** 2 + B * s + K
     Th = (Zs * R + V) / (Z + Zs)
