@@ -1,7 +1,10 @@
 """Command-line subcommands of the estimation package: ``estimate`` and ``figures``.
 
 ``register(subparsers)`` adds them to the project's CLI (orchestrator/cli.py);
-``python -m estimation`` runs them on their own.
+``python -m estimation`` runs them on their own. Both take the analysis the user sets
+(method, band, Welch segment, overlap, window, each correction) and work for any number
+of joints; ``figures`` writes the lab report (FRF tables, Bode plots, parameters) or, for
+this project's simulated grid, the paper's figures.
 """
 
 from __future__ import annotations
@@ -11,89 +14,182 @@ import json
 import sys
 from pathlib import Path
 
+import trialformat as tf
 from trialformat import reference as ref
 
-from .conditions import PAPER, RECOMMENDED, evaluate, group_conditions
+from .conditions import PAPER, RECOMMENDED
 from .estimator import METHODS
-from .io import read_trials
+from .lab import UNITS, AnalysisOptions, analyse, element_indices, estimation_units
+from .labreport import write_lab_report
 from .report import make_report
+from .synthetic import ARM_3DOF
+
+TRUTHS = ("none", "table1", "reference-3dof")
+
+
+def _analysis_arguments(p, truth_default="none") -> None:
+    g = p.add_argument_group("analysis (docs/estimation.md; defaults from the data)")
+    g.add_argument("--method", choices=("auto",) + METHODS, default="auto",
+                   help="auto: full (T P^-1) for one-joint trials or position trials with "
+                        "a recorded reference, closed_loop for all-joints trials, direct "
+                        "(angle to torque) for position trials without a reference")
+    g.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
+                   help="fit band [Hz] (default 0 to the declared perturbation.cutoff_hz)")
+    g.add_argument("--nperseg", type=int, default=8192, help="Welch segment [samples]")
+    g.add_argument("--noverlap", type=int, help="Welch overlap [samples] (default 3/4 "
+                                                 "of the segment)")
+    g.add_argument("--nfft", type=int, help="FFT length [samples] (default: the segment)")
+    g.add_argument("--window", default="hann", help="Welch window (scipy.signal name)")
+    g.add_argument("--sampling-correction", choices=("auto", "on", "off"), default="auto",
+                   help="half-sample delay of the inertial term for left-limit torque "
+                        "sampling; auto: only for trials declaring sensors.torque_sampling "
+                        "= left_limit (or simulated by this project)")
+    g.add_argument("--leakage-correction", choices=("auto", "on", "off"), default="auto",
+                   help="model the Hann window's leakage in the fit (auto: where possible)")
+    g.add_argument("--raw", action="store_true", help="both corrections off")
+    g.add_argument("--pool", action="store_true",
+                   help="average the spectra of unlabelled recordings of the same set-up "
+                        "(by default each is estimated alone)")
+    g.add_argument("--truth", choices=TRUTHS + (("auto",) if truth_default == "auto" else ()),
+                   default=truth_default,
+                   help="known answer of simulated trials: Table I (2 joints) or "
+                        "reference-3dof.md; none for lab data"
+                        + ("; auto: table1 for the paper kind" if truth_default == "auto"
+                           else ""))
 
 
 def register(subparsers) -> None:
     """Add ``estimate`` and ``figures`` to an argparse subparsers object."""
-    p = subparsers.add_parser("estimate", help="estimate the arm impedance from trials",
-                              description="Estimate Z per condition from a folder or files "
-                                          "(.csv+.json or .mat) and print the fit.")
+    p = subparsers.add_parser("estimate", help="estimate the joint impedance from trials",
+                              description="Estimate Z and fit M, B, K per recording or "
+                                          "condition from a folder or files (.csv+.json "
+                                          "or .mat), for any number of joints.")
     p.add_argument("source", nargs="+", help="folder of trials, or trial files")
-    p.add_argument("--method", choices=METHODS, default="decomposition")
-    p.add_argument("--raw", action="store_true",
-                   help="plain fit: no compensation of the left-limit sampling of tau_h and "
-                        "no removal of the Welch window leakage (both on by default; the "
-                        "leakage removal needs a perturbation-based method)")
-    p.add_argument("--truth", choices=("none", "table1"), default="none",
-                   help="compare with Table I (simulated trials); 'none' for lab data: VAF "
-                        "against the fitted second-order model")
+    _analysis_arguments(p)
     p.add_argument("--json", type=Path, help="write the results to this JSON file")
     p.set_defaults(func=run_estimate)
 
-    p = subparsers.add_parser("figures", help="paper figures and tables from a grid run",
-                              description="Figs. 2-4 and tables of every condition of a "
-                                          "folder of trials.")
-    p.add_argument("folders", type=Path, nargs="+",
-                   help="folders of trials (e.g. a grid run and its all-joints trials)")
+    p = subparsers.add_parser("figures", help="lab report, or the paper figures of a grid",
+                              description="Lab report (per recording/condition: FRF CSV and "
+                                          "JSON, Bode plot with coherence and fit, M, B, K "
+                                          "table) or the paper's Figs. 2-4 and tables.")
+    p.add_argument("folders", type=Path, nargs="+", help="folders of trials")
     p.add_argument("--out", type=Path, required=True, help="report folder")
-    p.add_argument("--truth", choices=("none", "table1"), default="table1")
+    p.add_argument("--kind", choices=("auto", "lab", "paper"), default="auto",
+                   help="auto: paper for this project's simulated 2-joint grid, else lab")
+    _analysis_arguments(p, truth_default="auto")
     p.add_argument("--fig-variant", default=RECOMMENDED,
-                   help="main variant of Figs. 2-4 (estimation.conditions.VARIANTS names; "
-                        f"default {RECOMMENDED}, the recommended bias-removing estimator)")
+                   help=f"paper kind: main variant of Figs. 2-4 (default {RECOMMENDED})")
     p.add_argument("--compare", default=PAPER,
-                   help=f"variant drawn beside it in Fig. 2, with its own Figs. 3-4 "
-                        f"(default {PAPER}, the paper's T/R; 'none' to omit)")
+                   help=f"paper kind: variant drawn beside it (default {PAPER}; 'none')")
     p.set_defaults(func=run_figures)
 
 
-def run_estimate(args) -> int:
-    source = args.source[0] if len(args.source) == 1 else args.source
-    trials = read_trials(source)
-    arm = ref.arm_matrices() if args.truth == "table1" else None
+def options_from(args) -> AnalysisOptions:
+    options = AnalysisOptions(
+        method=args.method, band_hz=tuple(args.band) if args.band else None,
+        nperseg=args.nperseg, noverlap=args.noverlap, nfft=args.nfft, window=args.window,
+        sampling_correction="off" if args.raw else args.sampling_correction,
+        leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool)
+    options.check()
+    return options
+
+
+def _truth(name, n):
+    if name == "table1":
+        if n != 2:
+            raise ValueError(f"--truth table1 is a 2-joint arm; these trials have {n} joints")
+        return ref.arm_matrices()
+    if name == "reference-3dof":
+        if n != 3:
+            raise ValueError(f"--truth reference-3dof is a 3-joint arm; these trials have "
+                             f"{n} joints")
+        return ARM_3DOF
+    return None
+
+
+def _read(sources, options):
+    sources = [Path(s) for s in sources]
+    trials = []
+    for s in sources:
+        trials += tf.read_trials(s, min_samples=options.nperseg)
+    return trials
+
+
+def lab_results(trials, options, truth_name="none"):
     results = []
-    for cond, group in group_conditions(trials).items():
-        corrected = not args.raw
-        rows = evaluate(group, truth=arm, variants=[(
-            args.method, args.method, corrected, corrected and args.method != "direct")])
-        if not rows:
-            print(f"{cond.label} ({cond.tuning}): no trials suited to method "
-                  f"{args.method!r}", file=sys.stderr)
-            continue
-        row = rows[0]
-        results.append({"condition": cond.__dict__, **row})
-        print(_describe(cond, row, arm is not None))
+    for unit in estimation_units(trials, pool=options.pool):
+        truth = _truth(truth_name, unit.trials[0].n_dof)
+        results.append(analyse(unit, options, truth=truth))
+    return results
+
+
+def run_estimate(args) -> int:
+    options = options_from(args)
+    trials = _read(args.source, options)
+    results = lab_results(trials, options, args.truth)
+    for r in results:
+        print(describe(r))
     if args.json:
+        doc = [{**r.to_json(), "condition": r.label,
+                "compensated": r.corrections["left_limit_sampling"],
+                "leakage_removed": r.corrections["window_leakage"]} for r in results]
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=1))
+        tf.atomic_write(args.json, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
     return 0 if results else 1
 
 
-def _describe(cond, row, has_truth) -> str:
-    lines = [f"{cond.label} tuning={cond.tuning} method={row['variant']} "
-             f"sampling_compensated={row['compensated']} leakage_removed={row['leakage_removed']}"]
-    for e in ("11", "12", "21", "22"):
-        text = (f"  Z{e}: M={row[f'M_{e}']:.4f}±{row[f'M_ci_{e}']:.4f} "
-                f"B={row[f'B_{e}']:.4f}±{row[f'B_ci_{e}']:.4f} "
-                f"K={row[f'K_{e}']:.4f}±{row[f'K_ci_{e}']:.4f}  VAF={row[f'vaf_{e}']:.3f}% "
-                f"R2={row[f'r2_{e}']:.5f} coh={row[f'coh_{e}']:.4f}")
-        if has_truth:
-            text += (f"  err M/B/K={row[f'err_M_{e}']:+.2f}/{row[f'err_B_{e}']:+.2f}/"
-                     f"{row[f'err_K_{e}']:+.2f}%")
+def describe(r) -> str:
+    """Text of one result: set-up line, one line per element, the warnings."""
+    c = r.corrections
+    lines = [f"{r.label}: method={r.method}, trials={', '.join(r.trials)} ({r.reason}); "
+             f"band {r.band_hz[0]:g}-{r.band_hz[1]:g} Hz ({r.band_source}), "
+             f"{r.n_segments} segments; "
+             f"sampling correction {'on' if c['left_limit_sampling'] else 'off'}, "
+             f"leakage correction {'on' if c['window_leakage'] else 'off'}"]
+    conf = int(round(100 * r.fit.confidence))
+    for i, k in element_indices(r.n_dof):
+        e = f"Z{i + 1}{k + 1}" if r.n_dof > 1 else "Z"
+        inertia = "M" if r.n_dof > 1 else "I"
+        text = (f"  {e}: K={r.fit.K[i, k]:.5g}±{r.fit.K_ci[i, k]:.2g} {UNITS['K']}  "
+                f"B={r.fit.B[i, k]:.5g}±{r.fit.B_ci[i, k]:.2g} {UNITS['B']}  "
+                f"{inertia}={r.fit.M[i, k]:.5g}±{r.fit.M_ci[i, k]:.2g} {UNITS['M']}  "
+                f"R2={r.fit.r2[i, k]:.5f} VAF={r.vaf[i, k]:.3f}% "
+                f"coh={r.coherence_band[i, k]:.3f}")
+        if r.errors_pct is not None:
+            text += "  err K/B/M=" + "/".join(f"{r.errors_pct[p][i, k]:+.2f}"
+                                              for p in "KBM") + "%"
         lines.append(text)
+    lines.append(f"  (± : {conf} % confidence intervals)")
+    lines += [f"  warning: {w}" for w in r.warnings]
     return "\n".join(lines)
 
 
+def _paper_kind(trials) -> bool:
+    return all(t.n_dof == 2 and str(t.meta.get("source", "")).startswith(
+        ("simulated: orchestrator", "estimation.synthetic: linear")) for t in trials)
+
+
 def run_figures(args) -> int:
-    compare = None if args.compare.lower() == "none" else args.compare
-    result = make_report(args.folders, args.out, truth=args.truth, variant=args.fig_variant,
-                         compare=compare)
-    for f in result["files"]:
+    options = options_from(args)
+    trials = _read(args.folders, options)
+    kind = args.kind
+    if kind == "auto":
+        kind = "paper" if _paper_kind(trials) else "lab"
+    if kind == "paper":
+        truth = "table1" if args.truth in ("auto", "table1") else "none"
+        compare = None if args.compare.lower() == "none" else args.compare
+        result = make_report(args.folders, args.out, truth=truth, variant=args.fig_variant,
+                             compare=compare)
+        files = result["files"]
+    else:
+        truth = "none" if args.truth == "auto" else args.truth
+        results = lab_results(trials, options, truth)
+        files = write_lab_report(results, args.out, options={
+            **options.__dict__, "truth": truth})
+        for r in results:
+            print(describe(r))
+    for f in files:
         print(f)
     return 0
 
@@ -104,6 +200,6 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, KeyError) as exc:
         print(f"python -m estimation {args.command}: error: {exc}", file=sys.stderr)
         return 1

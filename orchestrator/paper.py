@@ -126,7 +126,8 @@ def run_paper(out, *, quick=False, tuning="reference", duration_s=None, workers=
     manifest = run_grid(trials_dir, workers=workers, scheduler=scheduler, progress=progress,
                         fmu_path=fmu_path, **plan)
     grid_s = time.perf_counter() - start
-    report = make_report(trials_dir, report_dir, truth="table1", progress=progress)
+    report = make_report(trials_dir, report_dir, truth="table1", progress=progress,
+                         workers=workers if scheduler is None else 2)
     result = {
         "format": PAPER_FORMAT, "status": "done", "out": str(out),
         "trials_dir": str(trials_dir), "report_dir": str(report_dir), "options": options,

@@ -6,3 +6,10 @@ class TrialFormatError(ValueError):
 
     The message always names the file, and the row, column or key where it applies.
     """
+
+
+class MatFileError(TrialFormatError):
+    """A MATLAB ``.mat`` trial breaks the layout of docs/estimation.md ("MATLAB files").
+
+    The message names the file and the variable or key.
+    """

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from . import reference as ref
+from . import csvtable
 from .errors import TrialFormatError
 
 FORMAT = "arm-impedance-trial/1"
@@ -37,7 +38,10 @@ class Trial:
     t : ndarray [s], shape (N,)
     tau_delta, theta, tau_h, tau_m : ndarray, shape (N, n)
         Perturbation [N m], measured angle [rad], measured interaction torque [N m],
-        motor torque command [N m]; column j-1 is joint j.
+        motor torque command [N m]; column j-1 is joint j. ``tau_delta`` and ``tau_m``
+        may be None in a position-perturbation trial.
+    theta_ref : ndarray [rad], shape (N, n), or None
+        Commanded position reference of a position-perturbation trial, when recorded.
     extra : dict of ndarray
         Extra columns, by header name.
     name : str
@@ -48,13 +52,20 @@ class Trial:
 
     meta: dict
     t: np.ndarray
-    tau_delta: np.ndarray
-    theta: np.ndarray
-    tau_h: np.ndarray
-    tau_m: np.ndarray
+    tau_delta: np.ndarray | None = None
+    theta: np.ndarray | None = None
+    tau_h: np.ndarray | None = None
+    tau_m: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
     name: str = ""
     filled_defaults: list = field(default_factory=list)
+    theta_ref: np.ndarray | None = None
+
+    @property
+    def perturbation_kind(self) -> str:
+        """``"torque"`` (default) or ``"position"`` (log-format.md, "Position perturbations")."""
+        pert = self.meta.get("perturbation") or {}
+        return str(pert.get("kind", "torque"))
 
     @property
     def n_dof(self) -> int:
@@ -66,8 +77,13 @@ class Trial:
 
     @property
     def perturbed_dof(self) -> int | None:
-        """1-based perturbed joint, or None when all joints are perturbed at once."""
+        """1-based perturbed joint, or None when all joints are perturbed at once.
+
+        A one-joint trial's perturbed joint is joint 1, declared or not.
+        """
         k = self.meta.get("perturbed_dof")
+        if k is None and int(self.meta.get("n_dof", 2)) == 1:
+            return 1
         return None if k is None else int(k)
 
     @property
@@ -75,10 +91,22 @@ class Trial:
         return int(self.t.shape[0])
 
     def signal(self, name: str) -> np.ndarray:
-        """One of ``tau_delta``, ``theta``, ``tau_h``, ``tau_m`` as an (N, n) array."""
-        if name not in SIGNALS:
-            raise KeyError(f"unknown signal {name!r}; expected one of {SIGNALS}")
-        return getattr(self, name)
+        """One of ``tau_delta``, ``theta``, ``tau_h``, ``tau_m``, ``theta_ref`` as (N, n).
+
+        Raises KeyError for an unknown name or a signal this trial does not carry.
+        """
+        if name not in SIGNALS + ("theta_ref",):
+            raise KeyError(f"unknown signal {name!r}; expected one of {SIGNALS + ('theta_ref',)}")
+        value = getattr(self, name)
+        if value is None:
+            raise KeyError(f"trial {self.name or '(unnamed)'} carries no {name!r} "
+                           f"({self.perturbation_kind} perturbation)")
+        return value
+
+    def signals(self) -> tuple[str, ...]:
+        """Names of the signals this trial carries, in column order."""
+        names = [s for s in SIGNALS if getattr(self, s) is not None]
+        return tuple(names + (["theta_ref"] if self.theta_ref is not None else []))
 
 
 def default_metadata(n_dof: int = 2) -> dict:
@@ -102,8 +130,16 @@ def default_metadata(n_dof: int = 2) -> dict:
 
 
 def column_names(n_dof: int) -> list[str]:
-    """CSV header for n joints: ``t`` then each signal's ``[1]..[n]`` columns."""
+    """CSV header of a torque-perturbation trial: ``t`` then each signal's ``[1]..[n]``."""
     return ["t"] + [f"{s}[{j}]" for s in SIGNALS for j in range(1, n_dof + 1)]
+
+
+def required_columns(meta: dict) -> list[str]:
+    """Columns a reader requires for this metadata (position trials need fewer)."""
+    n = int(meta["n_dof"])
+    if (meta.get("perturbation") or {}).get("kind", "torque") == "position":
+        return ["t"] + [f"{s}[{j}]" for s in ("theta", "tau_h") for j in range(1, n + 1)]
+    return column_names(n)
 
 
 # ----------------------------------------------------------------------------- writing
@@ -112,42 +148,58 @@ def column_names(n_dof: int) -> list[str]:
 def write_trial(stem: str | os.PathLike, trial: Trial) -> Path:
     """Write ``stem.csv`` and ``stem.json`` atomically; return the CSV path.
 
-    Values are written with 17 significant digits, so a trial read back is bit-identical.
+    Values are written in their shortest round-trip form, so a trial read back is
+    bit-identical;
+    the sign and angle conventions the metadata declare are restored on writing. The
+    files get the user's umask (as ``open`` would), not the private mode of a temp file.
     """
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     n = trial.n_dof
-    header = column_names(n) + list(trial.extra)
-    cols = [trial.t[:, None]] + [trial.signal(s).reshape(-1, n) for s in SIGNALS]
+    header, cols = ["t"], [trial.t[:, None]]
+    stored = _convention(trial.meta, trial, inverse=True)
+    for s in trial.signals():
+        header += [f"{s}[{j}]" for j in range(1, n + 1)]
+        cols.append(np.asarray(stored.get(s, trial.signal(s)), dtype=float).reshape(-1, n))
+    header += list(trial.extra)
     cols += [np.asarray(v, dtype=float)[:, None] for v in trial.extra.values()]
     table = np.hstack(cols)
     meta = copy.deepcopy(trial.meta)
     meta.setdefault("format", FORMAT)
     csv_path, json_path = stem.with_suffix(".csv"), stem.with_suffix(".json")
-    _atomic_write(csv_path, lambda fh: fh.write(_format_csv(header, table)))
-    _atomic_write(json_path, lambda fh: fh.write(json.dumps(meta, indent=2).encode()))
+    atomic_write(csv_path, lambda fh: fh.write(csvtable.to_text(header, table)))
+    atomic_write(json_path, lambda fh: fh.write(json.dumps(meta, indent=2).encode()))
     return csv_path
 
 
-def _format_csv(header: list[str], table: np.ndarray) -> bytes:
-    # One % over the whole table: about twice as fast as np.savetxt's per-row loop.
-    row = ",".join(["%.17g"] * table.shape[1]) + "\n"
-    body = (row * table.shape[0]) % tuple(table.ravel().tolist())
-    return (",".join(header) + "\n" + body).encode()
+def atomic_write(path: str | os.PathLike, write) -> None:
+    """Write through a temporary file and rename; ``write(fh)`` gets a binary handle.
 
-
-def _atomic_write(path: Path, write) -> None:
+    The file ends with mode 0666 masked by the process umask.
+    """
+    path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~current_umask())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def current_umask() -> int:
+    """The process umask (read by setting and restoring it)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+_atomic_write = atomic_write  # old private name, kept for callers
 
 
 def trial_exists(stem: str | os.PathLike) -> bool:
@@ -160,34 +212,65 @@ def trial_exists(stem: str | os.PathLike) -> bool:
 
 
 def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Trial:
-    """Read one trial from ``NAME.csv`` (or ``NAME.json``, or the stem).
+    """Read one trial: ``NAME.csv`` (+ ``NAME.json``), the stem, or ``NAME.mat``.
+
+    CSV of any common writer is accepted (docs/spec/log-format.md, "Lab data"); ``.mat``
+    files are read by :func:`trialformat.matlab.read_trial_mat`. ``t`` is checked against
+    ``fs`` at its printed resolution and returned as the exact grid ``arange(N) / fs``.
+    ``tau_h`` and ``theta`` come back in the project's conventions (``torque_sign``,
+    ``angles`` of the metadata applied).
 
     Raises
     ------
     TrialFormatError
-        On anything log-format.md tells a reader to refuse; the message names the file.
+        On anything log-format.md tells a reader to refuse; the message names the file and
+        the 1-based data row, column or key.
     """
+    if Path(path).suffix.lower() == ".mat":
+        from .matlab import read_trial_mat
+        return read_trial_mat(path, min_samples=min_samples)
     stem = Path(path)
     if stem.suffix in (".csv", ".json"):
         stem = stem.with_suffix("")
     csv_path, json_path = stem.with_suffix(".csv"), stem.with_suffix(".json")
     meta, filled = _read_metadata(json_path)
-    header, table = _read_table(csv_path)
-    arrays = _split_columns(csv_path, header, table, meta["n_dof"])
-    trial = Trial(meta=meta, name=stem.name, filled_defaults=filled, **arrays)
-    check_trial(trial, csv_path, min_samples=min_samples)
+    if not csv_path.is_file():
+        raise TrialFormatError(f"{csv_path}: data file missing")
+    header, delimiter = csvtable.read_header(csv_path)
+    arrays = _columns(csv_path, header, delimiter, meta)
+    return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples)
+
+
+def finish_trial(meta: dict, arrays: dict, name: str, filled: list, where, *,
+                 min_samples: int = MIN_SAMPLES) -> Trial:
+    """Build, check and convert a trial from its arrays (shared by the CSV and .mat readers)."""
+    trial = Trial(meta=meta, name=name, filled_defaults=filled, **arrays)
+    check_trial(trial, where, min_samples=min_samples)
+    trial.t = np.arange(trial.n_samples) / trial.fs
+    for s, value in _convention(meta, trial).items():
+        setattr(trial, s, value)
     if filled:
-        warnings.warn(f"{json_path.name}: metadata keys absent, filled from the reference "
-                      f"configuration: {', '.join(filled)}", stacklevel=2)
+        warnings.warn(f"{Path(str(where)).name}: metadata keys absent, filled from the "
+                      f"reference configuration: {', '.join(filled)}", stacklevel=3)
     return trial
 
 
 def read_trials(source, *, min_samples: int = MIN_SAMPLES) -> list[Trial]:
-    """Read every trial of a folder (each ``*.csv`` with its ``.json``) or a list of paths."""
+    """Read every trial of a folder (``*.csv`` and ``*.mat``) or of a list of paths.
+
+    A stem present both as ``NAME.csv`` and ``NAME.mat`` is refused as ambiguous.
+    """
     if isinstance(source, (str, os.PathLike)) and Path(source).is_dir():
-        paths = sorted(p for p in Path(source).glob("*.csv"))
+        csv_paths = sorted(Path(source).glob("*.csv"))
+        mat_paths = sorted(Path(source).glob("*.mat"))
+        both = sorted({p.stem for p in csv_paths} & {p.stem for p in mat_paths})
+        if both:
+            raise TrialFormatError(f"{source}: trial(s) {both} present both as .csv and "
+                                   f".mat; keep one")
+        paths = csv_paths + mat_paths
         if not paths:
-            raise TrialFormatError(f"{source}: folder holds no trial (no NAME.csv)")
+            raise TrialFormatError(f"{source}: folder holds no trial (no NAME.csv or "
+                                   f"NAME.mat)")
     elif isinstance(source, (str, os.PathLike)):
         paths = [Path(source)]
     else:
@@ -202,7 +285,7 @@ def _read_metadata(json_path: Path) -> tuple[dict, list[str]]:
         raise TrialFormatError(f"{json_path}: metadata file missing (every NAME.csv needs "
                                f"its NAME.json)")
     try:
-        with open(json_path, encoding="utf-8") as fh:
+        with open(json_path, encoding="utf-8-sig") as fh:
             meta = json.load(fh)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise TrialFormatError(f"{json_path}: JSON does not parse: {exc}") from None
@@ -211,19 +294,29 @@ def _read_metadata(json_path: Path) -> tuple[dict, list[str]]:
     return meta, complete_metadata(meta, json_path)
 
 
+_CHOICES = {("perturbation", "kind"): ("torque", "position"),
+            ("sensors", "torque_sampling"): ("left_limit", "instantaneous"),
+            ("sensors", "torque_sign"): (1, -1),
+            (None, "angles"): ("relative", "absolute")}
+
+
 def complete_metadata(meta: dict, where) -> list[str]:
     """Check the metadata keys and fill absent ones from the reference, in place.
 
-    Shared by the readers of other containers (e.g. estimation's ``.mat`` reader).
-    Returns the keys filled; raises TrialFormatError naming ``where``.
+    Integer keys written as integral floats (``2.0``, MATLAB doubles) become ints; 2.5 is
+    refused. Shared by the readers of other containers (``.mat``). Returns the keys
+    filled; raises TrialFormatError naming ``where``.
     """
-    json_path = where
+    _integral(meta, "n_dof", where, default=2)
     n_dof = meta.get("n_dof", 2)
-    if not isinstance(n_dof, int) or isinstance(n_dof, bool) or n_dof < 1:
-        raise TrialFormatError(f"{json_path}: key 'n_dof' must be a positive integer, "
+    if n_dof < 1:
+        raise TrialFormatError(f"{where}: key 'n_dof' must be a positive integer, "
                                f"got {n_dof!r}")
     defaults = default_metadata(n_dof)
     defaults["perturbed_dof"] = None
+    if isinstance(meta.get("perturbation"), dict) and \
+            meta["perturbation"].get("kind") == "position":
+        del defaults["perturbation"]  # the torque perturbation's keys do not apply
     filled = []
     for key, value in defaults.items():
         if key not in meta:
@@ -235,62 +328,104 @@ def complete_metadata(meta: dict, where) -> list[str]:
                 if sub not in meta[key]:
                     meta[key][sub] = sub_value
                     filled.append(f"{key}.{sub}")
+    _integral(meta, "perturbed_dof", where)
+    for sub in ("level", "seed", "order"):
+        if isinstance(meta.get("perturbation"), dict):
+            _integral(meta["perturbation"], sub, where, prefix="perturbation.")
+    if isinstance(meta.get("sensors"), dict):
+        _integral(meta["sensors"], "torque_sign", where, prefix="sensors.")
     k = meta["perturbed_dof"]
-    if k is not None and (not isinstance(k, int) or isinstance(k, bool) or not 1 <= k <= n_dof):
-        raise TrialFormatError(f"{json_path}: key 'perturbed_dof' must be null or an integer "
+    if k is not None and not 1 <= k <= n_dof:
+        raise TrialFormatError(f"{where}: key 'perturbed_dof' must be null or an integer "
                                f"in 1..{n_dof}, got {k!r}")
     fs = meta["fs"]
-    if not isinstance(fs, (int, float)) or not np.isfinite(fs) or fs <= 0:
-        raise TrialFormatError(f"{json_path}: key 'fs' must be a positive number, got {fs!r}")
+    if (not isinstance(fs, (int, float)) or isinstance(fs, bool) or not np.isfinite(fs)
+            or fs <= 0):
+        raise TrialFormatError(f"{where}: key 'fs' must be a positive number, got {fs!r}")
+    for (group, key), allowed in _CHOICES.items():
+        holder = meta if group is None else meta.get(group)
+        if isinstance(holder, dict) and key in holder and holder[key] not in allowed:
+            name = key if group is None else f"{group}.{key}"
+            raise TrialFormatError(f"{where}: key '{name}' must be one of {list(allowed)}, "
+                                   f"got {holder[key]!r}")
     return filled
 
 
-def _read_table(csv_path: Path) -> tuple[list[str], np.ndarray]:
-    if not csv_path.is_file():
-        raise TrialFormatError(f"{csv_path}: data file missing")
-    with open(csv_path, encoding="utf-8") as fh:
-        header = [h.strip() for h in fh.readline().strip().split(",")]
-        try:
-            table = np.loadtxt(fh, delimiter=",", dtype=float, ndmin=2)
-        except ValueError as exc:
-            raise TrialFormatError(f"{csv_path}: non-numeric value ({_row_hint(exc)})") from None
-    if table.size and table.shape[1] != len(header):
-        raise TrialFormatError(f"{csv_path}: {table.shape[1]} values per row but "
-                               f"{len(header)} header columns")
-    bad = ~np.isfinite(table)
-    if bad.any():
-        row, col = np.argwhere(bad)[0]
-        raise TrialFormatError(f"{csv_path}: non-finite value {table[row, col]!r} in column "
-                               f"'{header[col]}' at data row {row + 1}")
-    return header, table
+def _integral(holder: dict, key: str, where, *, default=None, prefix="") -> None:
+    """Turn an integral float into an int in place; refuse non-integral values."""
+    value = holder.get(key, default)
+    if value is None or key not in holder:
+        return
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if ok and isinstance(value, float):
+        ok = np.isfinite(value) and value == int(value)
+    if not ok:
+        raise TrialFormatError(f"{where}: key '{prefix}{key}' must be an integer, "
+                               f"got {value!r}")
+    holder[key] = int(value)
 
 
-def _row_hint(exc: ValueError) -> str:
-    # numpy's message names the row ("... at row 12, column 3"); keep it, it is the location.
-    return str(exc).strip().splitlines()[-1]
-
-
-def _split_columns(csv_path: Path, header: list[str], table: np.ndarray, n: int) -> dict:
-    index = {name: i for i, name in enumerate(header)}
-    missing = [c for c in column_names(n) if c not in index]
+def _columns(csv_path: Path, header: list[str], delimiter: str, meta: dict) -> dict:
+    """The trial's arrays from the CSV, by the columns its metadata declare."""
+    n = int(meta["n_dof"])
+    present = set(header)
+    missing = [c for c in required_columns(meta) if c not in present]
     if missing:
-        raise TrialFormatError(f"{csv_path}: missing columns for the declared "
-                               f"n_dof={n}: {', '.join(missing)}")
-    arrays = {"t": table[:, index["t"]].copy()}
+        raise TrialFormatError(f"{csv_path}: missing columns for the declared n_dof={n}: "
+                               f"{', '.join(missing)} (header: {', '.join(header)})")
+    known = {f"{s}[{j}]" for s in SIGNALS + ("theta_ref",) for j in range(1, n + 1)} | {"t"}
+    wanted = [h for h in header if h in known]
+    dup = sorted({h for h in wanted if wanted.count(h) > 1})
+    if dup:
+        raise TrialFormatError(f"{csv_path}: column(s) {', '.join(dup)} appear more than "
+                               f"once in the header")
+    for s in ("tau_delta", "tau_m"):
+        cols = [f"{s}[{j}]" for j in range(1, n + 1)]
+        have = [c for c in cols if c in present]
+        if have and len(have) != n:
+            raise TrialFormatError(f"{csv_path}: missing columns for the declared n_dof={n}: "
+                                   f"{', '.join(c for c in cols if c not in present)}")
+    declared, extra = csvtable.read_columns(csv_path, header, delimiter, wanted)
+    arrays = {"t": declared["t"], "extra": extra}
     for s in SIGNALS:
-        arrays[s] = table[:, [index[f"{s}[{j}]"] for j in range(1, n + 1)]].copy()
-    known = set(column_names(n))
-    arrays["extra"] = {h: table[:, i].copy() for h, i in index.items() if h not in known}
+        if f"{s}[1]" in declared:
+            arrays[s] = np.column_stack([declared[f"{s}[{j}]"] for j in range(1, n + 1)])
+    ref_cols = [f"theta_ref[{j}]" for j in range(1, n + 1)]
+    if any(c in declared for c in ref_cols):
+        arrays["theta_ref"] = np.column_stack(
+            [declared[c] if c in declared else np.zeros_like(declared["t"]) for c in ref_cols])
     return arrays
 
 
+def _convention(meta: dict, trial: Trial, *, inverse: bool = False) -> dict:
+    """Signals converted to (or, inverse, back from) the project's sign and angle convention."""
+    out = {}
+    sign = (meta.get("sensors") or {}).get("torque_sign", 1)
+    if sign == -1 and trial.tau_h is not None:
+        out["tau_h"] = -trial.tau_h
+    if meta.get("angles") == "absolute":
+        offset = np.deg2rad(np.asarray(meta["posture_deg"], dtype=float))
+        for s in ("theta", "theta_ref"):
+            if getattr(trial, s) is not None:
+                out[s] = getattr(trial, s) + (offset if inverse else -offset)
+    return out
+
+
 def check_trial(trial: Trial, where, *, min_samples: int = MIN_SAMPLES) -> None:
-    """Check a trial's arrays against its metadata; raise TrialFormatError naming ``where``."""
-    t, fs, n = trial.t, trial.fs, trial.n_dof
+    """Check a trial's arrays against its metadata; raise TrialFormatError naming ``where``.
+
+    ``t`` is uniform when every ``|t[i] - i/fs|`` is below half its last printed digit or
+    1e-3/fs, or equals ``i/fs`` in single precision (log-format.md, "Lab data").
+    """
+    t, fs, n = np.asarray(trial.t, dtype=float), trial.fs, trial.n_dof
     if t.shape[0] < min_samples:
         raise TrialFormatError(f"{where}: {t.shape[0]} samples, fewer than one spectral "
                                f"segment ({min_samples})")
-    for s in SIGNALS:
+    needed = ("theta", "tau_h") if trial.perturbation_kind == "position" else SIGNALS
+    for s in needed:
+        if getattr(trial, s) is None:
+            raise TrialFormatError(f"{where}: signal {s} missing")
+    for s in trial.signals():
         arr = trial.signal(s)
         if arr.shape != (t.shape[0], n):
             raise TrialFormatError(f"{where}: signal {s} has shape {arr.shape}, expected "
@@ -298,25 +433,58 @@ def check_trial(trial: Trial, where, *, min_samples: int = MIN_SAMPLES) -> None:
         bad = ~np.isfinite(arr)
         if bad.any():
             row, col = np.argwhere(bad)[0]
-            raise TrialFormatError(f"{where}: non-finite value in column '{s}[{col + 1}]' "
-                                   f"at data row {row + 1}")
-    dt = np.diff(t)
-    if t[0] != 0.0 and abs(t[0]) > 0.5 / fs:
+            raise TrialFormatError(f"{where}: non-finite or blank value {arr[row, col]!r} in "
+                                   f"column '{s}[{col + 1}]' at data row {row + 1}")
+    _check_time(t, fs, where)
+    _check_perturbation(trial, where)
+
+
+def _check_time(t: np.ndarray, fs: float, where) -> None:
+    bad = ~np.isfinite(t)
+    if bad.any():
+        raise TrialFormatError(f"{where}: non-finite or blank value in column 't' at data row "
+                               f"{int(np.argmax(bad)) + 1}")
+    if abs(t[0]) > 0.5 / fs:
         raise TrialFormatError(f"{where}: column 't' must start at 0, starts at {t[0]!r}")
+    dt = np.diff(t)
     if (dt <= 0).any():
         row = int(np.argmax(dt <= 0)) + 2
         raise TrialFormatError(f"{where}: column 't' is not increasing at data row {row}")
-    expected = 1.0 / fs
-    off = np.abs(dt - expected) > 1e-6 * expected + 1e-9
-    if off.any():
-        row = int(np.argmax(off)) + 2
-        spread = dt.max() - dt.min()
-        if spread > 1e-6 * expected + 1e-9:
-            raise TrialFormatError(f"{where}: column 't' is not uniform (step {dt[row - 2]!r} "
-                                   f"at data row {row}, expected {expected!r})")
+    grid = np.arange(t.size) / fs
+    err = np.abs(t - grid)
+    tol = max(0.5 * 10.0 ** -_printed_decimals(t), 1e-3 / fs) * (1 + 1e-9)
+    off = (err > tol) & (t.astype(np.float32) != grid.astype(np.float32))
+    if not off.any():
+        return
+    step = (t[-1] - t[0]) / (t.size - 1)
+    if abs(step * fs - 1) > 1e-3:
         raise TrialFormatError(f"{where}: key 'fs'={fs!r} disagrees with column 't' "
-                               f"(step {dt[0]!r} s, i.e. fs={1.0 / dt[0]!r})")
+                               f"(mean step {step!r} s, i.e. fs={1.0 / step!r})")
+    row = int(np.argmax(off)) + 1
+    raise TrialFormatError(f"{where}: column 't' is not uniform at data row {row} "
+                           f"(t={t[row - 1]!r}, expected {grid[row - 1]!r} at fs={fs!r})")
+
+
+def _printed_decimals(t: np.ndarray) -> int:
+    """Fewest decimals that reproduce every ``t`` (its printed resolution); 15 if none."""
+    ulp = 4 * np.spacing(max(1.0, float(np.abs(t).max())))
+    for d in range(0, 15):
+        if np.all(np.abs(np.round(t, d) - t) <= ulp):
+            return d
+    return 15
+
+
+def _check_perturbation(trial: Trial, where) -> None:
     k = trial.perturbed_dof
-    if k is not None and not np.any(trial.tau_delta[:, k - 1]):
-        raise TrialFormatError(f"{where}: column 'tau_delta[{k}]' is identically zero for "
-                               f"the perturbed joint {k}")
+    if k is None:
+        return
+    if trial.perturbation_kind == "position":
+        name = "theta_ref" if trial.theta_ref is not None else "theta"
+    else:
+        name = "tau_delta"
+    if not np.any(trial.signal(name)[:, k - 1]):
+        hint = (" (a position perturbation? declare \"perturbation\": {\"kind\": "
+                "\"position\"} and give theta_ref[k] if it was recorded)"
+                if name == "tau_delta" else "")
+        raise TrialFormatError(f"{where}: column '{name}[{k}]' is identically zero for "
+                               f"the perturbed joint {k}{hint}")

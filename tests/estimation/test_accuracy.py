@@ -50,9 +50,9 @@ def test_confidence_intervals_cover_under_their_assumption(arm):
     rng = np.random.default_rng(0)
     Zt = true_impedance(F, arm[0][0, 0], arm[1][0, 0], arm[2][0, 0])
     hits = []
-    for _ in range(300):
+    for _ in range(600):  # coverage 0.96/0.93/0.94 over 2000 draws; MC s.e. 0.9 % here
         noise = 0.02 * (rng.standard_normal(F.size) + 1j * rng.standard_normal(F.size))
-        fit = fit_second_order(F, Zt * (1 + noise))
+        fit = fit_second_order(F, Zt * (1 + noise), hac_bins=0)  # iid: no bin correlation
         hits.append([abs(p - t) <= ci for p, t, ci in
                      ((fit.M, arm[0][0, 0], fit.M_ci), (fit.B, arm[1][0, 0], fit.B_ci),
                       (fit.K, arm[2][0, 0], fit.K_ci))])

@@ -74,3 +74,14 @@ def test_report_refuses_unknown_variant_and_empty_folder(grid_folder, tmp_path):
         make_report(grid_folder, tmp_path, variant="fast", progress=False)
     with pytest.raises(ValueError, match="no trial"):
         make_report(tmp_path, tmp_path / "out", progress=False)
+
+
+def test_report_in_worker_processes_equals_in_process(grid_folder, tmp_path, monkeypatch):
+    import estimation.report as report
+    one = make_report(grid_folder, tmp_path / "one", progress=False, workers=1)
+    monkeypatch.setattr(report, "PROCESS_MIN_TASKS", 0)  # use the pool on 2 conditions
+    two = make_report(grid_folder, tmp_path / "two", progress=False, workers=2)
+    assert one["rows"] == two["rows"]
+    assert sorted(p.name for p in (tmp_path / "one").iterdir()) == \
+        sorted(p.name for p in (tmp_path / "two").iterdir())
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp left

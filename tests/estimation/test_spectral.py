@@ -84,3 +84,19 @@ def test_window_derivative_identity_on_a_sinusoid():
 def test_refuses_bad_lengths(n_x, n_y):
     with pytest.raises(EstimationError, match="samples"):
         sp.cross_spectrum(np.zeros(n_x), np.zeros(n_y), fs=FS)
+
+
+def test_spectral_matrix_equals_scipy_csd(noise):
+    from scipy import signal
+    from estimation.spectral import spectral_matrix
+    z = np.column_stack([noise[:, 0], noise[:, 1], noise[:, 0] + 0.5 * noise[:, 1]])
+    for kw in ({}, {"window": "hamming", "nperseg": 4096, "noverlap": 1024, "nfft": 8192},
+               {"detrend": False}):
+        f, G = spectral_matrix(z, fs=1000.0, **kw)
+        opts = {"nperseg": 8192, "noverlap": 6144, "nfft": 8192, "window": "hann",
+                "detrend": "constant", **kw}
+        for a in range(3):
+            for b in range(3):
+                f2, g = signal.csd(z[:, a], z[:, b], fs=1000.0, **opts)
+                np.testing.assert_allclose(G[:, a, b], g, rtol=1e-9, atol=1e-12 * abs(g).max())
+        np.testing.assert_array_equal(f, f2)

@@ -1,0 +1,196 @@
+"""Results a lab uses, written all or nothing: FRF tables, parameters, Bode plots.
+
+``write_lab_report(results, out)`` writes, per result (recording or condition) ``LABEL``:
+
+- ``frf_LABEL.csv`` / ``frf_LABEL.json``: frequency [Hz], magnitude [N m/rad], phase [deg]
+  and coherence [-] of every element Z_ik, with the fitted model's magnitude and phase;
+- ``bode_LABEL.png``: magnitude, phase and coherence of every element (n x n columns of
+  panels), the estimate, the fitted model and the band;
+
+and for all results ``parameters.csv`` / ``parameters.md`` (M, B, K with confidence
+intervals and units, R^2, VAF, coherence per element) and ``results.json`` (everything,
+with the analysis options and the warnings). The report is built in a temporary folder
+beside ``out`` and renamed into place at the end, so a failure leaves no partial report
+(and an older report at ``out`` untouched).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import re
+import shutil
+import tempfile
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from trialformat import atomic_write  # noqa: E402
+from trialformat.logs import current_umask  # noqa: E402
+
+from .lab import FRF_UNITS, UNITS, element_indices, result_rows  # noqa: E402
+
+
+def safe_name(label: str) -> str:
+    """A file-name-safe form of a label."""
+    return re.sub(r"[^A-Za-z0-9._+-]+", "_", label).strip("_") or "result"
+
+
+def write_lab_report(results, out, *, options=None) -> list[str]:
+    """Write the lab report of ``results`` (list of LabResult) into folder ``out``.
+
+    Returns the paths of the files written (inside ``out``).
+    """
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    try:
+        names = []
+        for r in results:
+            stem = safe_name(r.label)
+            names += write_frf(r, tmp / f"frf_{stem}")
+            names.append(_save(bode(r), tmp / f"bode_{stem}.png"))
+        names += write_parameters(results, tmp)
+        doc = {"options": options or {}, "results": [r.to_json() for r in results]}
+        names.append(_text(tmp / "results.json", json.dumps(doc, indent=1)))
+        os.chmod(tmp, 0o777 & ~current_umask())
+        _replace_dir(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return [str(out / Path(n).name) for n in names]
+
+
+def _replace_dir(tmp: Path, out: Path) -> None:
+    if out.exists():
+        old = out.with_name(f".{out.name}.old")
+        shutil.rmtree(old, ignore_errors=True)
+        os.replace(out, old)
+        os.replace(tmp, out)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(tmp, out)
+
+
+def write_frf(result, stem: Path) -> list[Path]:
+    """``stem.csv`` (units in the header) and ``stem.json`` (columns and units)."""
+    cols = result.frf_table()
+    header = [f"{c} [{_unit(c)}]" for c in cols]
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(header)
+    data = [np.asarray(v, dtype=float) for v in cols.values()]
+    writer.writerows(zip(*[[f"{x:.10g}" for x in col] for col in data]))
+    doc = {"label": result.label, "trials": result.trials, "method": result.method,
+           "band_hz": list(result.band_hz),
+           "units": {c: _unit(c) for c in cols},
+           "columns": {c: np.asarray(v, dtype=float).tolist() for c, v in cols.items()}}
+    return [_text(stem.with_suffix(".csv"), buf.getvalue()),
+            _text(stem.with_suffix(".json"), json.dumps(doc))]
+
+
+def _unit(column: str) -> str:
+    if column in FRF_UNITS:
+        return FRF_UNITS[column]
+    return FRF_UNITS[column.split("_", 1)[1]]
+
+
+def write_parameters(results, folder: Path) -> list[Path]:
+    rows = result_rows(results)
+    cols = list(rows[0]) if rows else []
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    md = [parameters_markdown(results)]
+    return [_text(folder / "parameters.csv", buf.getvalue()),
+            _text(folder / "parameters.md", "\n".join(md))]
+
+
+def parameters_markdown(results) -> str:
+    """M, B, K +- CI per element and result, with R^2, VAF, coherence and warnings."""
+    lines = []
+    for r in results:
+        lines.append(f"### {r.label} ({r.method}, {', '.join(r.trials)})\n")
+        lines.append(f"band {r.band_hz[0]:g}-{r.band_hz[1]:g} Hz, {r.n_segments} segments "
+                     f"of {r.welch['nperseg']}, corrections: "
+                     f"sampling {'on' if r.corrections['left_limit_sampling'] else 'off'}, "
+                     f"leakage {'on' if r.corrections['window_leakage'] else 'off'}\n")
+        head = ["element"] + [f"{p} [{UNITS[p]}]" for p in "MBK"] + ["R^2", "VAF [%]",
+                                                                      "coherence"]
+        lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        conf = int(round(100 * r.fit.confidence))
+        for i, k in element_indices(r.n_dof):
+            cells = [f"Z{i + 1}{k + 1}" if r.n_dof > 1 else "Z"]
+            for p in "MBK":
+                cells.append(f"{getattr(r.fit, p)[i, k]:.5g} ± "
+                             f"{getattr(r.fit, f'{p}_ci')[i, k]:.2g}")
+            cells += [f"{r.fit.r2[i, k]:.4f}", f"{r.vaf[i, k]:.2f}",
+                      f"{r.coherence_band[i, k]:.3f}"]
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append(f"\n± : {conf} % confidence interval half-widths. "
+                     + ("1 joint: M is the inertia I.\n" if r.n_dof == 1 else "\n"))
+        lines += [f"- warning: {w}" for w in r.warnings] + [""]
+    return "\n".join(lines)
+
+
+def bode(result):
+    """Magnitude, phase and coherence of every element; estimate, fitted model and band."""
+    n = result.n_dof
+    f_max = min(2 * result.band_hz[1], result.fs / 2)
+    sel = (result.f > 0) & (result.f <= f_max)
+    f = result.f[sel]
+    fig, axes = plt.subplots(3 * n, n, figsize=(4.2 * n + 1, 6.6 * n + 0.6), sharex=True,
+                             squeeze=False)
+    for i, k in element_indices(n):
+        z, m, c = result.Z[sel, i, k], result.model[sel, i, k], result.coherence[sel, i, k]
+        ax_m, ax_p, ax_c = axes[3 * i, k], axes[3 * i + 1, k], axes[3 * i + 2, k]
+        e = f"Z{i + 1}{k + 1}" if n > 1 else "Z"
+        ax_m.loglog(f, np.abs(z), color="tab:blue", lw=1.0, label="estimate")
+        ax_m.loglog(f, np.abs(m), "k--", lw=1.2, label="fitted M, B, K")
+        ax_p.semilogx(f, np.degrees(np.angle(z)), color="tab:blue", lw=1.0)
+        ax_p.semilogx(f, np.degrees(np.angle(m)), "k--", lw=1.2)
+        ax_c.semilogx(f, c, color="tab:green", lw=1.0)
+        ax_c.set_ylim(0, 1.05)
+        ax_m.set_title(e)
+        ax_m.set_ylabel(f"|{e}| [N m/rad]")
+        ax_p.set_ylabel("phase [deg]")
+        ax_c.set_ylabel("coherence [-]")
+        for ax in (ax_m, ax_p, ax_c):
+            ax.axvspan(max(result.band_hz[0], f[0]), result.band_hz[1], color="0.9", zorder=0)
+            ax.grid(True, which="both", alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("frequency [Hz]")
+    axes[0, 0].legend(fontsize=8)
+    text = "; ".join(f"{p} = " + _matrix_text(getattr(result.fit, p)) + f" {UNITS[p]}"
+                     for p in ("K", "B", "M"))
+    fig.suptitle(f"{result.label}: {result.method}, band {result.band_hz[0]:g}-"
+                 f"{result.band_hz[1]:g} Hz (shaded)\n{text}", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def _matrix_text(a) -> str:
+    a = np.asarray(a)
+    if a.size == 1:
+        return f"{a.item():.4g}"
+    return "[" + "; ".join(" ".join(f"{v:.3g}" for v in row) for row in a) + "]"
+
+
+def _save(fig, path: Path) -> Path:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    atomic_write(path, lambda fh: fh.write(buf.getvalue()))
+    return path
+
+
+def _text(path: Path, text: str) -> Path:
+    atomic_write(path, lambda fh: fh.write(text.encode("utf-8")))
+    return path

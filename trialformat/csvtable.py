@@ -1,0 +1,134 @@
+"""CSV tables of any common writer, parsed by pyarrow (docs/spec/log-format.md, "Lab data").
+
+Accepted as RFC 4180 defines CSV: quoted header names and fields, CRLF or LF line ends, a
+UTF-8 byte-order mark, ``,`` ``;`` or tab as the field separator (``.`` decimal mark), and
+extra columns of any content (text, blank or NaN cells), which are returned only when
+numeric. The fast path is one ``pyarrow.csv.read_csv`` call; when it fails, the file is
+re-read with the standard ``csv`` module only to name the 1-based data row and the column
+at fault.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pacsv
+
+from .errors import TrialFormatError
+
+DELIMITERS = (",", ";", "\t")
+
+
+def read_header(path: Path) -> tuple[list[str], str]:
+    """Header names (quotes, BOM and surrounding blanks removed) and the field separator.
+
+    The separator is the candidate giving the most header fields.
+    """
+    with open(path, encoding="utf-8-sig", newline="") as fh:
+        first = fh.readline()
+    if not first.strip():
+        raise TrialFormatError(f"{path}: file is empty (no header row)")
+    best = max(DELIMITERS, key=lambda d: len(next(csv.reader([first], delimiter=d))))
+    header = [h.strip() for h in next(csv.reader([first], delimiter=best))]
+    return header, best
+
+
+def read_columns(path: Path, header: list[str], delimiter: str,
+                 numeric: list[str]) -> tuple[dict, dict]:
+    """Parse the data rows; return ``(declared, extra)`` dicts of float64 arrays.
+
+    ``numeric`` names the declared columns, which must parse as numbers in every row
+    (blank, NaN and infinite cells come back as NaN/inf for the caller's finiteness
+    check). Extra columns are returned when pyarrow reads them as numbers, else dropped.
+
+    Raises
+    ------
+    TrialFormatError
+        A row with the wrong number of fields or a non-numeric declared cell, naming the
+        file, the 1-based data row and the column.
+    """
+    keys = [f"c{i}" for i in range(len(header))]
+    index = {name: i for i, name in enumerate(header)}
+    types = {keys[index[name]]: pa.float64() for name in numeric}
+    try:
+        table = pacsv.read_csv(
+            path,
+            read_options=pacsv.ReadOptions(column_names=keys, skip_rows=1, use_threads=False),
+            parse_options=pacsv.ParseOptions(delimiter=delimiter),
+            convert_options=pacsv.ConvertOptions(column_types=types, strings_can_be_null=True))
+    except pa.ArrowInvalid as exc:
+        if "Empty CSV file" in str(exc):
+            return {name: np.empty(0) for name in numeric}, {}
+        _locate_error(path, header, delimiter, numeric, exc)
+    declared = {name: _as_float(table.column(keys[index[name]])) for name in numeric}
+    extra = {}
+    for name, key in zip(header, keys):
+        if name in declared or name in extra:
+            continue
+        col = table.column(key)
+        if pa.types.is_integer(col.type) or pa.types.is_floating(col.type):
+            extra[name] = _as_float(col)
+    return declared, extra
+
+
+def _as_float(column) -> np.ndarray:
+    """float64 copy of a pyarrow column, nulls (blank cells) as NaN.
+
+    Read from the Arrow buffers directly: pyarrow's own ``to_numpy`` imports pandas
+    (0.3 s per process) for columns with nulls.
+    """
+    parts = []
+    for chunk in column.chunks:
+        if not pa.types.is_float64(chunk.type):
+            chunk = chunk.cast(pa.float64())
+        data = np.frombuffer(chunk.buffers()[1], dtype=np.float64, count=len(chunk),
+                             offset=chunk.offset * 8).copy()
+        if chunk.null_count:
+            valid = np.unpackbits(np.frombuffer(chunk.buffers()[0], dtype=np.uint8),
+                                  bitorder="little")[chunk.offset:chunk.offset + len(chunk)]
+            data[valid == 0] = np.nan
+        parts.append(data)
+    return np.concatenate(parts) if parts else np.empty(0)
+
+
+def _locate_error(path, header, delimiter, numeric, exc) -> None:
+    """Find the first bad row/cell with the csv module and raise naming it."""
+    wanted = {header.index(name): name for name in numeric}
+    with open(path, encoding="utf-8-sig", newline="") as fh:
+        reader = csv.reader(fh, delimiter=delimiter)
+        next(reader)
+        for row_no, row in enumerate(reader, start=1):
+            if len(row) != len(header):
+                raise TrialFormatError(f"{path}: data row {row_no} has {len(row)} fields, the "
+                                       f"header has {len(header)}") from None
+            for i, name in wanted.items():
+                cell = row[i].strip()
+                if cell.lower() in ("", "nan", "na", "n/a", "null"):
+                    continue  # reported as non-finite by the caller
+                try:
+                    float(cell)
+                except ValueError:
+                    hint = (" (a decimal comma? write '.' as the decimal mark)"
+                            if "," in cell and delimiter != "," else "")
+                    raise TrialFormatError(f"{path}: non-numeric value {cell!r} in column "
+                                           f"'{name}' at data row {row_no}{hint}") from None
+    raise TrialFormatError(f"{path}: CSV does not parse: {exc}") from None
+
+
+def to_text(header: list[str], table: np.ndarray) -> bytes:
+    """The project's own writing: plain CSV, ``,`` separator, unquoted header.
+
+    Values in the shortest text that reads back to the same double (pyarrow's writer),
+    so a trial read back is bit-identical; about 4x faster than ``%.17g`` formatting.
+    """
+    columns = {f"c{i}": np.ascontiguousarray(table[:, i], dtype=float)
+               for i in range(table.shape[1])}
+    buf = io.BytesIO()
+    pacsv.write_csv(pa.table(columns), buf,
+                    write_options=pacsv.WriteOptions(include_header=False,
+                                                     quoting_style="none"))
+    return (",".join(header) + "\n").encode() + buf.getvalue()

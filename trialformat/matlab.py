@@ -1,0 +1,208 @@
+"""Trials in MATLAB ``.mat`` files, v4 to v7 (scipy.io) and v7.3 (HDF5, h5py).
+
+``NAME.mat`` holds the variables ``t`` (N samples, row or column), ``theta``, ``tau_h``
+and, for a torque perturbation, ``tau_delta`` and ``tau_m`` (N x n, one column per joint;
+a 1-joint trial may be a vector), optionally ``theta_ref`` (position perturbation), and
+the metadata ``meta``: a char array holding the JSON text of log-format.md, or a struct
+with the same fields. Without ``meta``, the metadata is read from ``NAME.json`` beside the
+file. Single precision (``single``) variables are accepted. The reader refuses what
+log-format.md tells a reader to refuse, naming the file and the variable or key.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+from scipy import io as sio
+
+from .errors import MatFileError
+from .logs import MIN_SAMPLES, SIGNALS, Trial, complete_metadata, finish_trial
+
+OPTIONAL = ("tau_delta", "tau_m", "theta_ref")
+
+
+def write_trial_mat(path, trial: Trial, *, meta_as: str = "json", version: str = "5"):
+    """Write a trial as ``NAME.mat`` (v5 by scipy.io) with the metadata as JSON or a struct.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Target ``.mat`` path.
+    trial : trialformat.Trial
+    meta_as : {"json", "struct"}
+        Store ``meta`` as a JSON char array or as a MATLAB struct.
+    version : {"5", "4"}
+        scipy.io's format; v4 holds no struct (use ``meta_as="json"``).
+    """
+    path = Path(path).with_suffix(".mat")
+    data = {"t": trial.t[:, None]}
+    data.update({s: trial.signal(s) for s in trial.signals()})
+    if meta_as == "json":
+        data["meta"] = json.dumps(trial.meta)
+    elif meta_as == "struct":
+        data["meta"] = _struct_safe(trial.meta)
+    else:
+        raise MatFileError(f"meta_as must be 'json' or 'struct', got {meta_as!r}")
+    sio.savemat(path, data, do_compression=version == "5", format=version)
+    return path
+
+
+def read_trial_mat(path, *, min_samples: int = MIN_SAMPLES) -> Trial:
+    """Read one trial from ``NAME.mat`` (metadata inside, or in ``NAME.json`` beside).
+
+    Raises
+    ------
+    MatFileError
+        The file does not load, a variable is missing or has the wrong shape, or the
+        metadata does not parse.
+    trialformat.TrialFormatError
+        The content breaks log-format.md (non-finite values, bad t, fs, perturbed_dof...).
+    """
+    path = Path(path)
+    data = _load(path)
+    meta = _metadata(path, data)
+    filled = complete_metadata(meta, path)
+    n = meta["n_dof"]
+    arrays = {"t": _vector(path, data, "t")}
+    position = (meta.get("perturbation") or {}).get("kind") == "position"
+    for s in SIGNALS + ("theta_ref",):
+        if s in data or not (s in OPTIONAL and (position or s == "theta_ref")):
+            arrays[s] = _matrix(path, data, s, arrays["t"].size, n)
+    return finish_trial(meta, arrays, path.stem, filled, path, min_samples=min_samples)
+
+
+def _load(path: Path) -> dict:
+    if not path.is_file():
+        raise MatFileError(f"{path}: file missing")
+    if _is_hdf5(path):  # v7.3
+        return _load_hdf5(path)
+    try:
+        return sio.loadmat(path, simplify_cells=True)
+    except (ValueError, OSError, TypeError, NotImplementedError,
+            sio.matlab.MatReadError) as exc:
+        raise MatFileError(f"{path}: not a readable MATLAB file (v4-v7.3): {exc}") from None
+
+
+def _is_hdf5(path: Path) -> bool:
+    import h5py
+    return h5py.is_hdf5(path)
+
+
+def _load_hdf5(path: Path) -> dict:
+    """A v7.3 file as loadmat(simplify_cells=True) would give it (MATLAB is column-major)."""
+    import h5py
+    try:
+        with h5py.File(path, "r") as fh:
+            return {k: _h5_value(fh[k], f"{path} variable '{k}'") for k in fh
+                    if not k.startswith("#")}
+    except OSError as exc:
+        raise MatFileError(f"{path}: not a readable MATLAB v7.3 file: {exc}") from None
+
+
+def _h5_value(node, where):
+    import h5py
+    cls = node.attrs.get("MATLAB_class", b"")
+    cls = cls.decode() if isinstance(cls, bytes) else str(cls)
+    if isinstance(node, h5py.Group):
+        return {k: _h5_value(node[k], f"{where}.{k}") for k in node if not k.startswith("#")}
+    if node.attrs.get("MATLAB_empty", 0):
+        return np.zeros((0, 0))
+    value = node[()]
+    if cls == "char":
+        return "".join(chr(c) for c in np.asarray(value).T.ravel())
+    if cls == "cell" or value.dtype == object:
+        raise MatFileError(f"{where}: cell arrays are not read; store numbers, a struct or "
+                           f"JSON text")
+    arr = np.asarray(value).T
+    if arr.size == 1:
+        return arr.item()
+    return arr.squeeze() if 1 in arr.shape and arr.ndim == 2 else arr
+
+
+def _metadata(path, data) -> dict:
+    raw = data.get("meta")
+    if raw is None:
+        json_path = path.with_suffix(".json")
+        if not json_path.is_file():
+            raise MatFileError(f"{path}: no variable 'meta' and no {json_path.name} beside it")
+        raw = json_path.read_text(encoding="utf-8-sig")
+        where = json_path
+    else:
+        where = f"{path} variable 'meta'"
+    if isinstance(raw, dict):
+        return _from_struct(raw)
+    if isinstance(raw, np.ndarray) and raw.dtype.kind == "U":
+        raw = "".join(raw.ravel())
+    if not isinstance(raw, str):
+        raise MatFileError(f"{where}: must be JSON text or a struct, got {type(raw).__name__}")
+    try:
+        meta = json.loads(raw)
+    except json.JSONDecodeError as exc:
+        raise MatFileError(f"{where}: JSON does not parse: {exc}") from None
+    if not isinstance(meta, dict):
+        raise MatFileError(f"{where}: metadata must be a JSON object")
+    return meta
+
+
+def _vector(path, data, name) -> np.ndarray:
+    if name not in data:
+        raise MatFileError(f"{path}: variable '{name}' missing")
+    arr = _numeric(path, data[name], name)
+    if arr.ndim > 2 or (arr.ndim == 2 and min(arr.shape) != 1):
+        raise MatFileError(f"{path}: variable '{name}' must be a vector, has shape {arr.shape}")
+    return arr.ravel()
+
+
+def _matrix(path, data, name, n_samples, n) -> np.ndarray:
+    if name not in data:
+        raise MatFileError(f"{path}: variable '{name}' missing (expected {n_samples} x {n})")
+    arr = _numeric(path, data[name], name)
+    if arr.ndim == 1 and n == 1:
+        arr = arr[:, None]
+    if arr.shape != (n_samples, n):
+        raise MatFileError(f"{path}: variable '{name}' has shape {arr.shape}, expected "
+                           f"({n_samples}, {n}) for n_dof={n}")
+    return arr
+
+
+def _numeric(path, value, name) -> np.ndarray:
+    try:
+        arr = np.asarray(value)
+        if arr.dtype.kind not in "biuf":
+            raise TypeError
+        return arr.astype(float)  # single precision widened exactly
+    except (TypeError, ValueError):
+        raise MatFileError(f"{path}: variable '{name}' is not numeric") from None
+
+
+def _struct_safe(value):
+    """Metadata for savemat: None becomes an empty array (MATLAB has no null)."""
+    if isinstance(value, dict):
+        return {k: _struct_safe(v) for k, v in value.items()}
+    if value is None:
+        return np.zeros((0, 0))
+    return value
+
+
+def _from_struct(value):
+    """Back from a loaded struct: arrays to lists, empty arrays to None, 1x1 to scalars."""
+    if isinstance(value, dict):
+        return {k: _from_struct(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        if value.size == 0:
+            return None
+        if value.dtype.kind == "U":
+            return "".join(value.ravel())
+        return _from_struct(value.tolist())
+    if isinstance(value, list):
+        return [_from_struct(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def is_mat(path: str | os.PathLike) -> bool:
+    return Path(path).suffix.lower() == ".mat"
