@@ -3,7 +3,8 @@
 Accepted as RFC 4180 defines CSV: quoted header names and fields, CRLF or LF line ends, a
 UTF-8 byte-order mark, ``,`` ``;`` or tab as the field separator (``.`` decimal mark), and
 extra columns of any content (text, blank or NaN cells), which are returned only when
-numeric. The fast path is one ``pyarrow.csv.read_csv`` call; when it fails, the file is
+numeric; their text may be in any encoding (Latin-1, cp1252: never decoded). The fast
+path is one ``pyarrow.csv.read_csv`` call; when it fails, the file is
 re-read with the standard ``csv`` module only to name the 1-based data row and the column
 at fault.
 """
@@ -28,7 +29,8 @@ def read_header(path: Path) -> tuple[list[str], str]:
 
     The separator is the candidate giving the most header fields.
     """
-    with open(path, encoding="utf-8-sig", newline="") as fh:
+    # undecodable bytes can only be in extra names (declared ones are ASCII): replaced
+    with open(path, encoding="utf-8-sig", errors="replace", newline="") as fh:
         first = fh.readline()
     if not first.strip():
         raise TrialFormatError(f"{path}: file is empty (no header row)")
@@ -59,7 +61,8 @@ def read_columns(path: Path, header: list[str], delimiter: str,
             path,
             read_options=pacsv.ReadOptions(column_names=keys, skip_rows=1, use_threads=False),
             parse_options=pacsv.ParseOptions(delimiter=delimiter),
-            convert_options=pacsv.ConvertOptions(column_types=types, strings_can_be_null=True))
+            convert_options=pacsv.ConvertOptions(column_types=types, strings_can_be_null=True,
+                                                 check_utf8=False))
     except pa.ArrowInvalid as exc:
         if "Empty CSV file" in str(exc):
             return {name: np.empty(0) for name in numeric}, {}
@@ -98,7 +101,7 @@ def _as_float(column) -> np.ndarray:
 def _locate_error(path, header, delimiter, numeric, exc) -> None:
     """Find the first bad row/cell with the csv module and raise naming it."""
     wanted = {header.index(name): name for name in numeric}
-    with open(path, encoding="utf-8-sig", newline="") as fh:
+    with open(path, encoding="utf-8-sig", errors="replace", newline="") as fh:
         reader = csv.reader(fh, delimiter=delimiter)
         next(reader)
         for row_no, row in enumerate(reader, start=1):

@@ -233,11 +233,13 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
     if stem.suffix in (".csv", ".json"):
         stem = stem.with_suffix("")
     csv_path, json_path = stem.with_suffix(".csv"), stem.with_suffix(".json")
+    if not (Path(path).exists() or csv_path.exists() or json_path.exists()):
+        raise TrialFormatError(f"{path}: no such file or folder")
     meta, filled = _read_metadata(json_path)
     if not csv_path.is_file():
         raise TrialFormatError(f"{csv_path}: data file missing")
     header, delimiter = csvtable.read_header(csv_path)
-    arrays = _columns(csv_path, header, delimiter, meta)
+    arrays = _columns(csv_path, header, delimiter, meta, filled)
     return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples)
 
 
@@ -297,7 +299,8 @@ def _read_metadata(json_path: Path) -> tuple[dict, list[str]]:
 _CHOICES = {("perturbation", "kind"): ("torque", "position"),
             ("sensors", "torque_sampling"): ("left_limit", "instantaneous"),
             ("sensors", "torque_sign"): (1, -1),
-            (None, "angles"): ("relative", "absolute")}
+            (None, "angles"): ("absolute",)}
+_CHOICE_HINTS = {"angles": " (absent: theta is the deviation from posture_deg)"}
 
 
 def complete_metadata(meta: dict, where) -> list[str]:
@@ -341,14 +344,31 @@ def complete_metadata(meta: dict, where) -> list[str]:
     fs = meta["fs"]
     if (not isinstance(fs, (int, float)) or isinstance(fs, bool) or not np.isfinite(fs)
             or fs <= 0):
-        raise TrialFormatError(f"{where}: key 'fs' must be a positive number, got {fs!r}")
+        raise TrialFormatError(f"{where}: key 'fs' must be a positive number, got "
+                               f"{_num(fs) if isinstance(fs, float) else repr(fs)}")
     for (group, key), allowed in _CHOICES.items():
         holder = meta if group is None else meta.get(group)
         if isinstance(holder, dict) and key in holder and holder[key] not in allowed:
             name = key if group is None else f"{group}.{key}"
-            raise TrialFormatError(f"{where}: key '{name}' must be one of {list(allowed)}, "
-                                   f"got {holder[key]!r}")
+            raise TrialFormatError(f"{where}: key '{name}' must be one of {list(allowed)}"
+                                   f"{_CHOICE_HINTS.get(key, '')}, got {holder[key]!r}")
+    _check_cutoff(meta, where)
+    if meta.get("format") != FORMAT:
+        warnings.warn(f"{Path(str(where)).name}: unknown format {meta.get('format')!r} "
+                      f"(this reader knows {FORMAT!r}); read as {FORMAT}", stacklevel=3)
     return filled
+
+
+def _check_cutoff(meta: dict, where) -> None:
+    """Refuse a ``perturbation.cutoff_hz`` that is not a positive number (it sets the band)."""
+    pert = meta.get("perturbation")
+    if not isinstance(pert, dict) or "cutoff_hz" not in pert:
+        return
+    c = pert["cutoff_hz"]
+    if (not isinstance(c, (int, float)) or isinstance(c, bool) or not np.isfinite(c)
+            or c <= 0):
+        raise TrialFormatError(f"{where}: key 'perturbation.cutoff_hz' must be a positive "
+                               f"number [Hz], got {c!r}")
 
 
 def _integral(holder: dict, key: str, where, *, default=None, prefix="") -> None:
@@ -365,13 +385,16 @@ def _integral(holder: dict, key: str, where, *, default=None, prefix="") -> None
     holder[key] = int(value)
 
 
-def _columns(csv_path: Path, header: list[str], delimiter: str, meta: dict) -> dict:
+def _columns(csv_path: Path, header: list[str], delimiter: str, meta: dict,
+             filled=()) -> dict:
     """The trial's arrays from the CSV, by the columns its metadata declare."""
     n = int(meta["n_dof"])
+    said = (f"n_dof={n} (filled from the reference: the JSON declares no n_dof)"
+            if "n_dof" in filled else f"the declared n_dof={n}")
     present = set(header)
     missing = [c for c in required_columns(meta) if c not in present]
     if missing:
-        raise TrialFormatError(f"{csv_path}: missing columns for the declared n_dof={n}: "
+        raise TrialFormatError(f"{csv_path}: missing columns for {said}: "
                                f"{', '.join(missing)} (header: {', '.join(header)})")
     known = {f"{s}[{j}]" for s in SIGNALS + ("theta_ref",) for j in range(1, n + 1)} | {"t"}
     wanted = [h for h in header if h in known]
@@ -383,7 +406,7 @@ def _columns(csv_path: Path, header: list[str], delimiter: str, meta: dict) -> d
         cols = [f"{s}[{j}]" for j in range(1, n + 1)]
         have = [c for c in cols if c in present]
         if have and len(have) != n:
-            raise TrialFormatError(f"{csv_path}: missing columns for the declared n_dof={n}: "
+            raise TrialFormatError(f"{csv_path}: missing columns for {said}: "
                                    f"{', '.join(c for c in cols if c not in present)}")
     declared, extra = csvtable.read_columns(csv_path, header, delimiter, wanted)
     arrays = {"t": declared["t"], "extra": extra}
@@ -433,45 +456,91 @@ def check_trial(trial: Trial, where, *, min_samples: int = MIN_SAMPLES) -> None:
         bad = ~np.isfinite(arr)
         if bad.any():
             row, col = np.argwhere(bad)[0]
-            raise TrialFormatError(f"{where}: non-finite or blank value {arr[row, col]!r} in "
+            raise TrialFormatError(f"{where}: non-finite or blank value {_num(arr[row, col])} in "
                                    f"column '{s}[{col + 1}]' at data row {row + 1}")
     _check_time(t, fs, where)
     _check_perturbation(trial, where)
 
 
 def _check_time(t: np.ndarray, fs: float, where) -> None:
+    """Refuse a ``t`` that is not ``arange(N) / fs`` at its printed resolution.
+
+    Each value may be off ``n/fs`` by half its own last printed digit (ties and float
+    noise included: a relative slack of 1e-6), by 1e-3/fs, or agree in single precision.
+    The printed digit is judged per value (:func:`_printed_resolution`), so fixed decimals
+    and significant digits (``%.7g``, whose resolution grows with magnitude) both read.
+    """
     bad = ~np.isfinite(t)
     if bad.any():
         raise TrialFormatError(f"{where}: non-finite or blank value in column 't' at data row "
                                f"{int(np.argmax(bad)) + 1}")
     if abs(t[0]) > 0.5 / fs:
-        raise TrialFormatError(f"{where}: column 't' must start at 0, starts at {t[0]!r}")
-    dt = np.diff(t)
-    if (dt <= 0).any():
-        row = int(np.argmax(dt <= 0)) + 2
-        raise TrialFormatError(f"{where}: column 't' is not increasing at data row {row}")
+        raise TrialFormatError(f"{where}: column 't' must start at 0, starts at "
+                               f"{_num(t[0])}")
     grid = np.arange(t.size) / fs
     err = np.abs(t - grid)
-    tol = max(0.5 * 10.0 ** -_printed_decimals(t), 1e-3 / fs) * (1 + 1e-9)
-    off = (err > tol) & (t.astype(np.float32) != grid.astype(np.float32))
+    off = err > 1e-3 / fs * (1 + 1e-6)
+    if off.any():
+        off &= t.astype(np.float32) != grid.astype(np.float32)
     if not off.any():
         return
+    res = _printed_resolution(t)
+    off &= err > 0.5 * res * (1 + 1e-6) + 4 * np.spacing(np.abs(t))
+    if not off.any():
+        return
+    _time_fault(t, grid, res, off, fs, where)
+
+
+def _time_fault(t, grid, res, off, fs, where) -> None:
+    """Raise the message that says what is wrong with a refused ``t``."""
+    dt = np.diff(t)
     step = (t[-1] - t[0]) / (t.size - 1)
+    # a repeated value is a fault only where the printing is finer than the step
+    back = (dt < 0) | ((dt == 0) & (res[1:] <= abs(step) * (1 + 1e-6)))
+    if back.any():
+        row = int(np.argmax(back)) + 2
+        raise TrialFormatError(f"{where}: column 't' is not increasing at data row {row} "
+                               f"(t={_num(t[row - 1])} after {_num(t[row - 2])})")
     if abs(step * fs - 1) > 1e-3:
-        raise TrialFormatError(f"{where}: key 'fs'={fs!r} disagrees with column 't' "
-                               f"(mean step {step!r} s, i.e. fs={1.0 / step!r})")
+        raise TrialFormatError(f"{where}: key 'fs'={_num(fs)} disagrees with column 't' "
+                               f"(mean step {_num(step)} s, i.e. fs={_num(1.0 / step)})")
     row = int(np.argmax(off)) + 1
     raise TrialFormatError(f"{where}: column 't' is not uniform at data row {row} "
-                           f"(t={t[row - 1]!r}, expected {grid[row - 1]!r} at fs={fs!r})")
+                           f"(t={_num(t[row - 1])}, expected {_num(grid[row - 1])} at "
+                           f"fs={_num(fs)}; allowed off by half the printed digit, "
+                           f"{_num(0.5 * res[row - 1])})")
 
 
-def _printed_decimals(t: np.ndarray) -> int:
-    """Fewest decimals that reproduce every ``t`` (its printed resolution); 15 if none."""
-    ulp = 4 * np.spacing(max(1.0, float(np.abs(t).max())))
-    for d in range(0, 15):
-        if np.all(np.abs(np.round(t, d) - t) <= ulp):
-            return d
-    return 15
+def _num(x) -> str:
+    """A number as plain text (no numpy repr)."""
+    return repr(float(x))
+
+
+def _printed_resolution(t: np.ndarray) -> np.ndarray:
+    """Last printed digit [s] of each ``t``, shape (N,).
+
+    The file's printing is taken as the coarser of two readings, both from the values
+    themselves: fixed decimals (the most decimals any value needs) and significant
+    digits (the most any value needs), so ``%.6f``, ``%.7g`` and ``%.5e`` all read.
+    """
+    a = np.abs(t)
+    ulp = 4 * np.spacing(np.maximum(a, 1e-300))
+    dec = np.full(t.shape, 17)
+    todo = np.ones(t.shape, dtype=bool)
+    for d in range(17):
+        idx = np.nonzero(todo)[0]
+        if not idx.size:
+            break
+        hit = np.abs(np.round(t[idx], d) - t[idx]) <= ulp[idx]
+        dec[idx[hit]] = d
+        todo[idx[hit]] = False
+    nz = a > 0
+    mag = np.zeros(t.shape)
+    mag[nz] = np.floor(np.log10(a[nz]))
+    sig = np.where(nz, dec + mag + 1, 1)
+    by_decimals = 10.0 ** -float(dec.max())
+    by_digits = 10.0 ** (mag - sig.max() + 1)
+    return np.maximum(by_decimals, by_digits)
 
 
 def _check_perturbation(trial: Trial, where) -> None:

@@ -1,0 +1,184 @@
+"""Lab files an outside tester wrote (issue 11 follow-up): printed ``t`` judged per value,
+any encoding in ignored columns, metadata values refused by name, plain numbers in messages.
+
+Inputs are generated here with pandas / Python formatting at rates and precisions this
+project does not write itself; the expected ``t`` is the exact grid ``arange(N) / fs``.
+"""
+
+import json
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import trialformat as tf
+from trialformat import TrialFormatError
+
+
+def _cols(fs, seconds, seed=5):
+    n = int(round(fs * seconds))
+    rng = np.random.default_rng(seed)
+    cols = {"t": np.arange(n) / fs}
+    for s in tf.SIGNALS:
+        cols[f"{s}[1]"] = rng.standard_normal(n)
+    return cols
+
+
+def _write(stem, cols, fs, *, t_fmt=None, table_fmt=None, **meta_keys):
+    frame = pd.DataFrame(cols)
+    if t_fmt is not None:
+        frame["t"] = [t_fmt % v for v in cols["t"]]
+    frame.to_csv(stem.with_suffix(".csv"), index=False, float_format=table_fmt)
+    meta = tf.default_metadata(1)
+    meta.update(fs=fs, perturbed_dof=1, **meta_keys)
+    stem.with_suffix(".json").write_text(json.dumps(meta))
+    return stem.with_suffix(".csv")
+
+
+# fs, printing of t (or of the whole table), seconds: long enough to reach the values
+# where the old one-decimal-count rule failed (ties at 8.0078125 s, 10.0009765625 s)
+UNIFORM = [
+    (2048.0, "%.6f", None, 17),     # rounding ties: exactly half the 6th decimal off
+    (1024.0, "%.6f", None, 17),
+    (1024.0, None, "%.7g", 17),     # significant digits: 10.00098 is 3.4e-6 off
+    (2048.0, None, "%.7g", 17),
+    (1024.0, None, "%.6g", 17),
+    (1024.0, None, "%.5e", 17),
+    (1024.0, "%.3f", None, 12),     # 1 ms printing coarser than the step: repeats
+    (2048.0, "%.3f", None, 12),
+    (500.0, "%.2f", None, 20),
+    (1000.0, "%.3f", None, 10),
+]
+
+
+@pytest.mark.parametrize("fs, t_fmt, table_fmt, seconds", UNIFORM,
+                         ids=[f"{u[0]:g}Hz-{u[1] or u[2]}" for u in UNIFORM])
+def test_t_correctly_printed_reads_as_the_grid(tmp_path, fs, t_fmt, table_fmt, seconds):
+    cols = _cols(fs, seconds)
+    path = _write(tmp_path / "w", cols, fs, t_fmt=t_fmt, table_fmt=table_fmt)
+    trial = tf.read_trial(path)
+    np.testing.assert_array_equal(trial.t, np.arange(len(cols["t"])) / fs)
+
+
+def test_t_off_by_more_than_its_own_digit_is_refused(tmp_path):
+    fs = 1024.0
+    cols = _cols(fs, 12)
+    path = _write(tmp_path / "w", cols, fs, table_fmt="%.7g")
+    lines = path.read_text().splitlines()
+    row = 10242                          # t = 10.0009765625, printed 10.00098
+    cells = lines[row].split(",")
+    assert cells[0] == "10.00098"
+    cells[0] = "10.00099"               # 1.3e-5 off: beyond half its digit (5e-6)
+    lines[row] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(TrialFormatError) as info:
+        tf.read_trial(path)
+    text = str(info.value)
+    assert "w.csv" in text and "not uniform at data row 10242" in text
+    assert "t=10.00099" in text and "np." not in text
+
+
+@pytest.mark.parametrize("fs, shift, match", [
+    (1024.0, -1, "not increasing at data row 5001"),   # a step back by one sample
+    (1000.0, 0, "not increasing at data row 5001"),    # a repeat finer printed than a step
+])
+def test_t_going_back_is_not_increasing(tmp_path, fs, shift, match):
+    cols = _cols(fs, 9)
+    t = np.round(cols["t"], 3)
+    t[5000] = t[4999] + shift * 1e-3
+    cols["t"] = t
+    path = _write(tmp_path / "w", cols, fs, t_fmt="%.3f")
+    with pytest.raises(TrialFormatError, match=match):
+        tf.read_trial(path)
+
+
+@pytest.mark.parametrize("encoding", ["latin-1", "cp1252"])
+def test_any_encoding_in_an_ignored_text_column(tmp_path, encoding):
+    fs = 1000.0
+    cols = _cols(fs, 8.2)
+    frame = pd.DataFrame(cols)
+    frame["Proband"] = "Müller – Größe" if encoding == "cp1252" else "Müller"
+    frame["Kommentar (µV)"] = ""
+    frame.loc[3, "Kommentar (µV)"] = "Start"
+    stem = tmp_path / "w"
+    frame.to_csv(stem.with_suffix(".csv"), index=False, encoding=encoding)
+    meta = tf.default_metadata(1)
+    meta.update(fs=fs, perturbed_dof=1)
+    stem.with_suffix(".json").write_text(json.dumps(meta))
+    trial = tf.read_trial(stem.with_suffix(".csv"))
+    np.testing.assert_array_equal(trial.theta[:, 0], cols["theta[1]"])
+
+
+def test_encoding_fault_in_a_declared_cell_names_the_file(tmp_path):
+    fs = 1000.0
+    stem = tmp_path / "w"
+    path = _write(stem, _cols(fs, 8.2), fs)
+    lines = path.read_bytes().split(b"\n")
+    cells = lines[7].split(b",")
+    cells[2] = b"\xfc"
+    lines[7] = b",".join(cells)
+    path.write_bytes(b"\n".join(lines))
+    with pytest.raises(TrialFormatError, match=r"w.csv: non-numeric value .* column "
+                                               r"'theta\[1\]' at data row 7"):
+        tf.read_trial(path)
+
+
+@pytest.mark.parametrize("keys, match", [
+    ({"perturbation": {"cutoff_hz": -5}}, r"'perturbation.cutoff_hz' must be a positive "
+                                          r"number \[Hz\], got -5"),
+    ({"perturbation": {"cutoff_hz": "15"}}, r"'perturbation.cutoff_hz' .* got '15'"),
+    ({"angles": "relative"}, r"'angles' must be one of \['absolute'\] .*got 'relative'"),
+])
+def test_bad_metadata_values_refused_by_name(tmp_path, keys, match):
+    fs = 1000.0
+    path = _write(tmp_path / "w", _cols(fs, 8.2), fs)
+    meta = json.loads(path.with_suffix(".json").read_text())
+    for k, v in keys.items():
+        meta[k] = {**meta[k], **v} if isinstance(v, dict) else v
+    path.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(TrialFormatError, match=match) as info:
+        tf.read_trial(path)
+    assert "w.json" in str(info.value)
+
+
+def test_unknown_format_warns(tmp_path):
+    fs = 1000.0
+    path = _write(tmp_path / "w", _cols(fs, 8.2), fs, format="other/2")
+    with pytest.warns(UserWarning, match=r"w.json: unknown format 'other/2'"):
+        tf.read_trial(path)
+    path = _write(tmp_path / "v", _cols(fs, 8.2), fs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tf.read_trial(path)
+
+
+def test_messages_print_plain_numbers(tmp_path):
+    fs = 1000.0
+    path = _write(tmp_path / "w", _cols(fs, 8.2), fs)
+    lines = path.read_text().splitlines()
+    cells = lines[9].split(",")
+    cells[2] = "nan"
+    lines[9] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(TrialFormatError, match=r"value nan in column 'theta\[1\]' "
+                                               r"at data row 9") as info:
+        tf.read_trial(path)
+    assert "np." not in str(info.value)
+
+
+def test_missing_path_says_so(tmp_path):
+    with pytest.raises(TrialFormatError, match=r"nothing_here: no such file or folder"):
+        tf.read_trials(tmp_path / "nothing_here")
+
+
+def test_filled_n_dof_is_called_filled(tmp_path):
+    fs = 1000.0
+    cols = _cols(fs, 8.2)
+    path = _write(tmp_path / "w", cols, fs)
+    meta = json.loads(path.with_suffix(".json").read_text())
+    del meta["n_dof"]
+    path.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(TrialFormatError, match=r"missing columns for n_dof=2 \(filled from "
+                                               r"the reference"):
+        tf.read_trial(path)
