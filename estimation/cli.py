@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 from pathlib import Path
 
 import trialformat as tf
@@ -109,10 +110,16 @@ def _truth(name, n):
 
 
 def _read(sources, options):
+    """Read the trials; the readers' warnings (keys filled from the reference, an unknown
+    format) go to stderr as one plain line each, not as Python warnings with source lines."""
     sources = [Path(s) for s in sources]
     trials = []
-    for s in sources:
-        trials += tf.read_trials(s, min_samples=options.nperseg)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for s in sources:
+            trials += tf.read_trials(s, min_samples=options.nperseg)
+    for w in caught:
+        print(f"note: {w.message}", file=sys.stderr)
     return trials
 
 

@@ -20,7 +20,8 @@ import numpy as np
 from .accuracy import corrected_impedance, fit_impedance, left_limit_delay, true_impedance, vaf
 from .conditions import condition_of
 from .errors import EstimationError
-from .estimator import METHODS, default_method, estimate_impedance, perturbation_of
+from .estimator import (METHODS, band_mask, default_method, estimate_impedance,
+                        perturbation_of)
 
 UNITS = {"M": "kg m^2", "B": "N m s/rad", "K": "N m/rad"}
 NAMES = {"M": "inertia", "B": "damping", "K": "stiffness"}
@@ -67,6 +68,12 @@ class AnalysisOptions:
                                       f"{getattr(self, name)!r}")
         if self.band_hz is not None and not 0 <= self.band_hz[0] < self.band_hz[1]:
             raise EstimationError(f"band must be 0 <= lo < hi [Hz], got {self.band_hz}")
+        if self.nperseg < 2:
+            raise EstimationError(f"--nperseg must be at least 2 samples, got {self.nperseg}")
+        if self.nfft is not None and self.nfft < self.nperseg:
+            raise EstimationError(f"--nfft {self.nfft} is shorter than the Welch segment "
+                                  f"(--nperseg {self.nperseg}); give --nfft >= "
+                                  f"{self.nperseg} or leave it out (default: the segment)")
         overlap = self.welch()["noverlap"]
         if not 0 <= overlap < self.nperseg:
             raise EstimationError(f"overlap must be in 0..nperseg-1 = {self.nperseg - 1}, "
@@ -273,6 +280,7 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
     fs = usable[0].fs
     band, band_source = _band(usable, options, fs, method)
     welch = options.welch()
+    _check_band_bins(band, band_source, welch, fs)
     est = estimate_impedance(usable, method=method, band_hz=band, detrend="constant", **welch)
     sampling = _switch(options.sampling_correction, left_limit_sampled(usable))
     leakage_ok = method != "direct" and options.window == "hann"
@@ -332,6 +340,32 @@ def _band(trials, options, fs, method):
     if hi > fs / 2:
         raise EstimationError(f"band top {hi} Hz is above the Nyquist frequency {fs / 2} Hz")
     return (lo, hi), source
+
+
+MIN_BAND_BINS = 3  # M, B, K: three real unknowns, two real equations per bin; CIs need more
+
+
+def _check_band_bins(band, band_source, welch, fs) -> None:
+    """Refuse a fit band that holds fewer than MIN_BAND_BINS frequencies of the Welch grid.
+
+    Names the option (or metadata key) that set the band and the values that would work.
+    """
+    df = fs / welch["nfft"]
+    lo, hi = band
+    count = int(np.count_nonzero(band_mask(np.arange(welch["nfft"] // 2 + 1) * df, band)))
+    if count >= MIN_BAND_BINS:
+        return
+    setter = (f"--band {lo:g} {hi:g}" if band_source == "set by the user"
+              else f"the band {lo:g}-{hi:g} Hz ({band_source})")
+    need_hi = lo + MIN_BAND_BINS * df
+    need_nfft = int(np.ceil(MIN_BAND_BINS * fs / (hi - lo)))
+    seg = (f"--nperseg {welch['nperseg']}" if welch["nfft"] == welch["nperseg"]
+           else f"--nfft {welch['nfft']}")
+    raise EstimationError(
+        f"{setter} holds {count} frequencies of the Welch grid ({seg} at fs={fs:g} Hz: one "
+        f"every {df:.4g} Hz); the fit needs at least {MIN_BAND_BINS}: widen the band to "
+        f"--band {lo:g} {need_hi:.4g} or more, or use --nperseg (and --nfft) >= {need_nfft} "
+        f"with trials at least that long")
 
 
 def _excited_band(trials, options, method):
