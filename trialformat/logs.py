@@ -352,7 +352,8 @@ def complete_metadata(meta: dict, where) -> list[str]:
             name = key if group is None else f"{group}.{key}"
             raise TrialFormatError(f"{where}: key '{name}' must be one of {list(allowed)}"
                                    f"{_CHOICE_HINTS.get(key, '')}, got {holder[key]!r}")
-    _check_cutoff(meta, where)
+    if not {"perturbation", "perturbation.cutoff_hz"} & set(filled):
+        _check_cutoff(meta, where)  # a filled reference value is not the lab's to fix
     if meta.get("format") != FORMAT:
         warnings.warn(f"{Path(str(where)).name}: unknown format {meta.get('format')!r} "
                       f"(this reader knows {FORMAT!r}); read as {FORMAT}", stacklevel=3)
@@ -360,7 +361,8 @@ def complete_metadata(meta: dict, where) -> list[str]:
 
 
 def _check_cutoff(meta: dict, where) -> None:
-    """Refuse a ``perturbation.cutoff_hz`` that is not a positive number (it sets the band)."""
+    """Refuse a ``perturbation.cutoff_hz`` that is not a positive number below fs/2 (it sets
+    the default fit band)."""
     pert = meta.get("perturbation")
     if not isinstance(pert, dict) or "cutoff_hz" not in pert:
         return
@@ -369,6 +371,9 @@ def _check_cutoff(meta: dict, where) -> None:
             or c <= 0):
         raise TrialFormatError(f"{where}: key 'perturbation.cutoff_hz' must be a positive "
                                f"number [Hz], got {c!r}")
+    if c > meta["fs"] / 2:
+        raise TrialFormatError(f"{where}: key 'perturbation.cutoff_hz'={c!r} Hz is above the "
+                               f"Nyquist frequency fs/2={_num(meta['fs'] / 2)} Hz")
 
 
 def _integral(holder: dict, key: str, where, *, default=None, prefix="") -> None:

@@ -128,6 +128,8 @@ def test_encoding_fault_in_a_declared_cell_names_the_file(tmp_path):
     ({"perturbation": {"cutoff_hz": -5}}, r"'perturbation.cutoff_hz' must be a positive "
                                           r"number \[Hz\], got -5"),
     ({"perturbation": {"cutoff_hz": "15"}}, r"'perturbation.cutoff_hz' .* got '15'"),
+    ({"perturbation": {"cutoff_hz": 900}}, r"'perturbation.cutoff_hz'=900 Hz is above the "
+                                           r"Nyquist frequency fs/2=500.0 Hz"),
     ({"angles": "relative"}, r"'angles' must be one of \['absolute'\] .*got 'relative'"),
 ])
 def test_bad_metadata_values_refused_by_name(tmp_path, keys, match):
