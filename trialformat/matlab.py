@@ -114,9 +114,31 @@ def _h5_value(node, where):
     if cls == "char":
         return "".join(chr(c) for c in np.asarray(value).T.ravel())
     if cls == "cell" or value.dtype == object:
-        raise MatFileError(f"{where}: cell arrays are not read; store numbers, a struct or "
-                           f"JSON text")
+        return _h5_cell(node, value, where)
     arr = np.asarray(value).T
+    if arr.size == 1:
+        return arr.item()
+    return arr.squeeze() if 1 in arr.shape and arr.ndim == 2 else arr
+
+
+def _h5_cell(node, value, where):
+    """A cell array of numbers (hdf5storage writes a Python list so) as a numeric array.
+
+    Each element must be a real number; anything else (text, nested cells, arrays) is
+    refused naming the variable.
+    """
+    import h5py
+    refs = np.asarray(value).T
+    items = []
+    for ref in refs.ravel():
+        item = node.file[ref] if isinstance(ref, h5py.Reference) else None
+        item = None if item is None or isinstance(item, h5py.Group) else \
+            _h5_value(item, where) if item.attrs.get("MATLAB_class", b"") != b"cell" else None
+        if not isinstance(item, (int, float)) or isinstance(item, bool):
+            raise MatFileError(f"{where}: cell arrays are read only when every element is "
+                               f"one number; store numbers, a struct or JSON text")
+        items.append(float(item))
+    arr = np.asarray(items).reshape(refs.shape)
     if arr.size == 1:
         return arr.item()
     return arr.squeeze() if 1 in arr.shape and arr.ndim == 2 else arr

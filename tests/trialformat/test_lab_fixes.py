@@ -184,3 +184,41 @@ def test_filled_n_dof_is_called_filled(tmp_path):
     with pytest.raises(TrialFormatError, match=r"missing columns for n_dof=2 \(filled from "
                                                r"the reference"):
         tf.read_trial(path)
+
+
+def _mat_arrays(fs=1000.0, seconds=8.2):
+    cols = _cols(fs, seconds)
+    data = {"t": cols["t"][:, None]}
+    data.update({s: cols[f"{s}[1]"][:, None] for s in tf.SIGNALS})
+    return data
+
+
+def test_v73_meta_with_python_lists_reads_like_scipy_v5(tmp_path):
+    hdf5storage = pytest.importorskip("hdf5storage")
+    from scipy import io as sio
+    meta = tf.default_metadata(1)
+    meta.update(perturbed_dof=1, posture_deg=[10.0], condition="slow")
+    meta["controller"]["K_rd"] = [10.0]
+    data = _mat_arrays()
+    sio.savemat(tmp_path / "v5.mat", {**data, "meta": meta})
+    hdf5storage.savemat(str(tmp_path / "v73.mat"), {**data, "meta": meta}, format="7.3",
+                        oned_as="column", store_python_metadata=False,
+                        matlab_compatible=True)
+    a, b = tf.read_trial(tmp_path / "v5.mat"), tf.read_trial(tmp_path / "v73.mat")
+    np.testing.assert_allclose(np.ravel(b.meta["posture_deg"]), [10.0])
+    np.testing.assert_allclose(np.ravel(a.meta["posture_deg"]), [10.0])
+    assert b.meta["condition"] == "slow"
+    np.testing.assert_allclose(b.meta["controller"]["K_rd"], a.meta["controller"]["K_rd"])
+    np.testing.assert_array_equal(b.theta, a.theta)
+
+
+def test_v73_cell_of_text_still_refused_by_name(tmp_path):
+    hdf5storage = pytest.importorskip("hdf5storage")
+    meta = tf.default_metadata(1)
+    meta.update(perturbed_dof=1, tags=["a", "b"])
+    hdf5storage.savemat(str(tmp_path / "v73.mat"), {**_mat_arrays(), "meta": meta},
+                        format="7.3", oned_as="column", store_python_metadata=False,
+                        matlab_compatible=True)
+    with pytest.raises(tf.MatFileError, match=r"v73.mat variable 'meta'.tags: cell arrays "
+                                              r"are read only when every element is one"):
+        tf.read_trial(tmp_path / "v73.mat")
