@@ -5,6 +5,8 @@ Rows, side by side in one run (best and median of REPEATS):
   project's own 17-digit CSV and on other writers' files (pandas %.7g, BOM+CRLF, float32);
 - the reader before issue 11 (``np.loadtxt`` parse of the same file, then the same split),
   reproduced here as it was so the ratio is measured, not remembered;
+- a file declared at 1024 Hz with ``t`` printed to 1 ms (each value judged at its own
+  printed digit: the slow path of the time check);
 - the ``.mat`` reader, v5 (scipy.io) and v7.3 (HDF5, h5py).
 Prints a table and writes bench/results/reader.json. Target: at most 30 ms for 50 s.
 """
@@ -62,6 +64,11 @@ def main(argv=None):
         frame.astype(np.float32).to_csv(tmp / "f32.csv", index=False)
         for stem in ("p7", "bom", "f32"):
             (tmp / f"{stem}.json").write_text(plain.with_suffix(".json").read_text())
+        # the same rows declared at 1024 Hz with t printed to 1 ms: every value is judged
+        # at its own printed digit (the reader's slow path)
+        frame.assign(t=[f"{v:.3f}" for v in np.arange(len(frame)) / 1024.0]).to_csv(
+            tmp / "t1ms.csv", index=False, float_format="%.7g")
+        (tmp / "t1ms.json").write_text(json.dumps({**trial.meta, "fs": 1024.0}))
         mat5 = tf.write_trial_mat(tmp / "m5.mat", trial)
         import hdf5storage
         data = {"t": trial.t[:, None], **{s: trial.signal(s) for s in tf.SIGNALS},
@@ -74,6 +81,8 @@ def main(argv=None):
         rows["read_trial, pandas %.7g"] = best_of(lambda: tf.read_trial(tmp / "p7.csv"))
         rows["read_trial, BOM + CRLF"] = best_of(lambda: tf.read_trial(tmp / "bom.csv"))
         rows["read_trial, float32 printed"] = best_of(lambda: tf.read_trial(tmp / "f32.csv"))
+        rows["read_trial, 1024 Hz, t to 1 ms, %.7g"] = best_of(
+            lambda: tf.read_trial(tmp / "t1ms.csv"))
         rows["read_trial, .mat v5 (compressed)"] = best_of(lambda: tf.read_trial(mat5))
         rows["read_trial, .mat v7.3 (HDF5)"] = best_of(lambda: tf.read_trial(tmp / "m73.mat"))
     ratio = rows["previous reader (np.loadtxt), same file"][1] / \
