@@ -524,9 +524,12 @@ def _num(x) -> str:
 def _printed_resolution(t: np.ndarray) -> np.ndarray:
     """Last printed digit [s] of each ``t``, shape (N,).
 
-    The file's printing is taken as the coarser of two readings, both from the values
-    themselves: fixed decimals (the most decimals any value needs) and significant
-    digits (the most any value needs), so ``%.6f``, ``%.7g`` and ``%.5e`` all read.
+    Read from the values themselves as the coarser of two readings: fixed decimals and
+    significant digits, so ``%.6f``, ``%.7g`` and ``%.5e`` all read. Each value is judged
+    at its own decimals and digits, or at those of the file (99th percentile over the
+    values) where it shows fewer: a printed ``30.000`` comes back as ``30.0`` and must not
+    get a coarser digit, while one value typed with more decimals does not make the rest
+    of the file stricter.
     """
     a = np.abs(t)
     ulp = 4 * np.spacing(np.maximum(a, 1e-300))
@@ -543,8 +546,10 @@ def _printed_resolution(t: np.ndarray) -> np.ndarray:
     mag = np.zeros(t.shape)
     mag[nz] = np.floor(np.log10(a[nz]))
     sig = np.where(nz, dec + mag + 1, 1)
-    by_decimals = 10.0 ** -float(dec.max())
-    by_digits = 10.0 ** (mag - sig.max() + 1)
+    file_dec = np.quantile(dec, 0.99, method="higher")
+    file_sig = np.quantile(sig, 0.99, method="higher")
+    by_decimals = 10.0 ** -np.maximum(dec, file_dec)
+    by_digits = 10.0 ** (mag - np.maximum(sig, file_sig) + 1)
     return np.maximum(by_decimals, by_digits)
 
 

@@ -222,3 +222,26 @@ def test_v73_cell_of_text_still_refused_by_name(tmp_path):
     with pytest.raises(tf.MatFileError, match=r"v73.mat variable 'meta'.tags: cell arrays "
                                               r"are read only when every element is one"):
         tf.read_trial(tmp_path / "v73.mat")
+
+
+def test_one_value_typed_finer_is_judged_at_its_own_digit(tmp_path):
+    """A %.3f file at 1024 Hz with one value typed to 4 decimals: that value is refused at
+    its own digit (1e-4), and the rest of the file is not made stricter by it."""
+    fs = 1024.0
+    cols = _cols(fs, 9)
+    path = _write(tmp_path / "w", cols, fs, t_fmt="%.3f")
+    lines = path.read_text().splitlines()
+    cells = lines[5001].split(",")    # t = 4.8828125, printed 4.883
+    cells[0] = "4.8832"               # 3.1e-4 off: inside half of 1 ms, not of its 0.1 ms
+    lines[5001] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(TrialFormatError, match=r"not uniform at data row 5001 \(t=4.8832"):
+        tf.read_trial(path)
+
+
+def test_repeats_from_coarse_printing_are_not_called_not_increasing(tmp_path):
+    """1 ms printing at 1024 Hz repeats values; with a wrong fs the fault is the fs."""
+    cols = _cols(1024.0, 9)
+    path = _write(tmp_path / "w", cols, 1000.0, t_fmt="%.3f")
+    with pytest.raises(TrialFormatError, match=r"key 'fs'=1000.0 disagrees with column 't'"):
+        tf.read_trial(path)
