@@ -29,7 +29,8 @@ from . import catalogue as cat
 from .arm import (ArmModel, arm_behind_cuff, arm_behind_transmission, estimate_arm,
                   link_inertia)
 from .errors import DiagnosisInputError
-from .features import FeatureConfig, grid_step, trial_features
+from .features import FeatureConfig, StorageContext, trial_features
+from .storage import find_grid
 from .gap import GapResult, make_normaliser, set_gap
 from .inputs import load_trials
 from .simulate import nominal_setup, simulate_like
@@ -163,8 +164,15 @@ class Evaluator:
         self.n_dof = units[0].trial.n_dof
         self._sims: dict = {} if cache is None else cache
         self.n_simulations = 0
+        # how each measured trial was stored: simulations are stored alike (storage.py)
+        self.contexts = {}
+        for u in units:
+            if u.trial.name not in self.contexts:
+                self.contexts[u.trial.name] = StorageContext.from_trial(u.trial)
         self.measured = {u.key: trial_features(u.trial, cfg.features, start=u.start,
-                                               stop=u.stop) for u in units}
+                                               stop=u.stop,
+                                               context=self.contexts[u.trial.name])
+                         for u in units}
         nominal = {u.key: self.features(u, {}) for u in units}
         if any(v is None for v in nominal.values()):
             bad = [k for k, v in nominal.items() if v is None]
@@ -193,7 +201,9 @@ class Evaluator:
         sim = self.simulation(unit, effects)
         if sim is None:
             return None
-        return trial_features(sim, self.cfg.features, start=unit.start, stop=unit.stop)
+        context = self.contexts[unit.trial.name]
+        return trial_features(context.store(sim), self.cfg.features, start=unit.start,
+                              stop=unit.stop, context=context)
 
     def gap(self, effects: dict) -> GapResult | None:
         """Gap of the model ``nominal + effects`` over the units (None: it diverged)."""
@@ -307,13 +317,16 @@ def _scalar_search(effect, ev, full, around):
 
 
 def _grid_estimate(ev: Evaluator) -> dict:
-    """Quantisation steps read from the grid the measured samples sit on."""
+    """Quantisation steps read from the grid the measured samples sit on (tolerant of
+    the storage rounding, storage.find_grid); 0 where no grid is resolvable."""
     enc, tor = [], []
     for u in ev.units:
-        t = u.trial
+        t, context = u.trial, ev.contexts[u.trial.name]
         for j in range(t.n_dof):
-            enc.append(grid_step(t.theta[u.start:u.stop, j]))
-            tor.append(grid_step(t.tau_h[u.start:u.stop, j]))
+            enc.append(find_grid(t.theta[u.start:u.stop, j], context.storage["theta"][j],
+                                 resolvable=context.resolvable["theta"][j]).step)
+            tor.append(find_grid(t.tau_h[u.start:u.stop, j], context.storage["tau_h"][j],
+                                 resolvable=context.resolvable["tau_h"][j]).step)
     enc_deg = float(np.degrees(np.median(enc)))
     return {"encoder_resolution_deg": enc_deg, "torque_resolution_nm": float(np.median(tor))}
 

@@ -51,6 +51,7 @@ def make_normaliser(measured: FeatureVector, nominal: FeatureVector,
     if batch.any():
         diff = measured.batches[:, batch] - nominal.batches[:, batch]
         var[batch] = np.var(diff, axis=0, ddof=1) / diff.shape[0]
+    var = var + measured.var_storage  # the rounding of the stored numbers (storage.py)
     floor = np.array([_floor(lab, v, config) for lab, v in zip(measured.labels,
                                                                 measured.values)])
     sigma2 = var + floor ** 2

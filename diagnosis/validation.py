@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-import trialformat as tf
 
 from . import catalogue as cat
 from .core import VERDICT_EFFECT, VERDICT_NONE, DiagnosisConfig, diagnose
+from .representation import trial_written, write_represented
 
 TRUTH_SUFFIX = ".truth.json"
 
@@ -45,6 +45,11 @@ class SetSpec:
     extra : dict
         Out-of-catalogue truth (plant parameters, e.g. an arm that differs), recorded in
         the truth file; empty for catalogue sets.
+    tuning_override : str
+        Declared tuning when not the one the effects need.
+    representation : str
+        How the trials are stored (representation.REPRESENTATIONS): the project's
+        bit-exact CSV, significant digits, fixed decimals or float32.
     """
 
     name: str
@@ -56,6 +61,7 @@ class SetSpec:
     resolution_level: int = 0
     extra: dict = field(default_factory=dict)
     tuning_override: str = ""
+    representation: str = "float64"
 
     def tuning(self) -> str:
         """The declared tuning: ``tuning_override`` if set, else robust when an effect
@@ -67,6 +73,7 @@ class SetSpec:
 
     def truth(self) -> dict:
         return {"effects": [{"name": n, "params": p} for n, p in self.effects],
+                "representation": self.representation,
                 **({"outside_catalogue": self.extra} if self.extra else {})}
 
 
@@ -126,7 +133,7 @@ def make_set(spec: SetSpec, folder, *, plant=None) -> Path:
     for seed in spec.seeds:
         for k in range(1, n + 1):
             stem = folder / f"{spec.name}_s{seed}_j{k}"
-            if tf.trial_exists(stem) and Path(str(stem) + TRUTH_SUFFIX).is_file():
+            if trial_written(stem) and Path(str(stem) + TRUTH_SUFFIX).is_file():
                 continue
             trial = simulate_trial(setup, perturbed_dof=k, level=spec.level, seed=seed,
                                    duration_s=spec.duration_s, effects=effects or None,
@@ -134,7 +141,7 @@ def make_set(spec: SetSpec, folder, *, plant=None) -> Path:
                                    plant=plant, name=stem.name)
             trial.meta["source"] = "diagnosis validation set (truth withheld)"
             _atomic_json(Path(str(stem) + TRUTH_SUFFIX), spec.truth())
-            tf.write_trial(stem, trial)
+            write_represented(stem, trial, spec.representation)
     return folder
 
 
