@@ -22,6 +22,10 @@ def register(subparsers) -> None:
                    help=f"comma-separated effects to try (default: all of "
                         f"{','.join(cat.CATALOGUE)})")
     p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local processes for the simulations (default: one per core)")
+    p.add_argument("--scheduler", default=None,
+                   help="Dask distributed scheduler address (e.g. tcp://127.0.0.1:8786)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_diagnose)
 
@@ -52,7 +56,8 @@ def _diagnose(args) -> int:
     from .core import DiagnosisConfig, diagnose
     config = DiagnosisConfig(effects=_effects(args.effects))
     report = diagnose(args.folder, args.out, config=config, plant=args.fmu,
-                      progress=not args.quiet)
+                      progress=not args.quiet, workers=args.workers,
+                      scheduler=args.scheduler)
     named = " + ".join(report.named)
     print(f"verdict: {report.verdict}{': ' + named if named else ''}")
     print(f"nominal gap {report.gap['nominal_all']:.3g} (threshold "

@@ -17,13 +17,13 @@ from __future__ import annotations
 
 import json
 import math
+import uuid
 from dataclasses import dataclass, field
 from itertools import combinations
 
 import numpy as np
 from scipy import optimize
 from scipy import signal as sps
-from tqdm.auto import tqdm
 
 from . import catalogue as cat
 from .arm import (ArmModel, arm_behind_cuff, arm_behind_transmission, estimate_arm,
@@ -33,6 +33,7 @@ from .features import FeatureConfig, StorageContext, trial_features
 from .storage import find_grid
 from .gap import GapResult, make_normaliser, set_gap
 from .inputs import load_trials
+from .parallel import Runner, worker_cache
 from .simulate import nominal_setup, simulate_like
 
 VERDICT_EFFECT = "effect"
@@ -146,6 +147,15 @@ def split_units(trials, cfg: DiagnosisConfig) -> tuple[list, list, str]:
     return cal, held, rule
 
 
+def storage_context(trial) -> StorageContext:
+    """How ``trial``'s numbers were stored (read once per trial object)."""
+    context = getattr(trial, "_storage_context", None)
+    if context is None:
+        context = StorageContext.from_trial(trial)
+        trial._storage_context = context
+    return context
+
+
 def _effects_key(effects: dict) -> str:
     return json.dumps(effects, sort_keys=True)
 
@@ -157,7 +167,7 @@ class Evaluator:
     """
 
     def __init__(self, setup, units, cfg: DiagnosisConfig, plant=None,
-                 cache: dict | None = None, setup_for=None):
+                 cache: dict | None = None, setup_for=None, norms: dict | None = None):
         self.setup, self.units, self.cfg, self.plant = setup, units, cfg, plant
         # the set-up a candidate is simulated with (the arm behind a candidate cuff)
         self.setup_for = setup_for or (lambda effects: setup)
@@ -165,14 +175,14 @@ class Evaluator:
         self._sims: dict = {} if cache is None else cache
         self.n_simulations = 0
         # how each measured trial was stored: simulations are stored alike (storage.py)
-        self.contexts = {}
-        for u in units:
-            if u.trial.name not in self.contexts:
-                self.contexts[u.trial.name] = StorageContext.from_trial(u.trial)
+        self.contexts = {u.trial.name: storage_context(u.trial) for u in units}
         self.measured = {u.key: trial_features(u.trial, cfg.features, start=u.start,
                                                stop=u.stop,
                                                context=self.contexts[u.trial.name])
                          for u in units}
+        if norms is not None:  # fixed by the nominal model elsewhere (a parallel worker)
+            self.norms = norms
+            return
         nominal = {u.key: self.features(u, {}) for u in units}
         if any(v is None for v in nominal.values()):
             bad = [k for k, v in nominal.items() if v is None]
@@ -428,7 +438,8 @@ def _jsonable(params: dict) -> dict:
 
 
 def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(),
-             plant=None, progress: bool = True) -> DiagnosisReport:
+             plant=None, progress: bool = True, workers: int | None = None,
+             scheduler=None) -> DiagnosisReport:
     """Diagnose the sim-to-real gap of a folder of measured trials.
 
     Parameters
@@ -443,6 +454,11 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         The plant FMU (default: the reference plant).
     progress : bool
         Show tqdm progress bars.
+    workers : int, optional
+        Local processes that run the simulations (default: one per core; 1: this
+        process). The result does not depend on it.
+    scheduler : str or distributed.Client, optional
+        Dask scheduler address (e.g. ``tcp://HOST:8786``): run on that cluster instead.
 
     Returns
     -------
@@ -468,47 +484,59 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     setup = nominal_setup(trials[0].meta, arm)
     setup_for = _setup_factory(trials[0].meta, arm, setup)
     full_units = [Unit(t, 0, t.n_samples, "all") for t in trials]
-    bar = tqdm(total=3 + len(config.effects), desc="diagnosis", disable=not progress,
-               unit="step")
-    bar.set_postfix_str("nominal")
+    n_dof = trials[0].n_dof
+    index = {t.name: i for i, t in enumerate(trials)}
+    plant_ref = getattr(plant, "path", plant)
+    state = _State(token=uuid.uuid4().hex, trials=trials, meta=trials[0].meta, arm=arm,
+                   setup=setup, config=config, plant=None if plant_ref is None else str(plant_ref),
+                   cal=[(index[u.trial.name], u.start, u.stop, u.role) for u in cal],
+                   held=[(index[u.trial.name], u.start, u.stop, u.role) for u in held])
     cache: dict = {}
-    ev_all = Evaluator(setup, full_units, config, plant, cache, setup_for)
-    nominal_all = ev_all.gap({})
-    bar.update()
-    ev_cal = Evaluator(setup, cal, config, plant, cache, setup_for)
-    ev_held = Evaluator(setup, held, config, plant, cache, setup_for)
-    g0_cal, g0_held = ev_cal.gap_value({}), ev_held.gap_value({})
-    bar.update()
-    singles = []
-    for name in config.effects:
-        bar.set_postfix_str(name)
-        params, gcal, nev, obj = fit_effect(name, ev_cal)
-        fit = EffectFit((name,), {name: _jsonable(params)}, gcal, nev, objective=obj)
-        fit.held_out_gap = ev_held.gap_value(fit.simulation_effects(trials[0].n_dof))
-        singles.append(fit)
-        bar.update()
-    singles.sort(key=lambda f: (f.calibration_gap, f.objective))
-    significant = nominal_all.value > config.significance_gap
-    pairs = []
-    best = next((f for f in singles if f.nameable), None)
-    if significant and best is not None and _residual_needs_pair(best, g0_cal, config):
-        bar.set_postfix_str("pairs")
-        partners = [f for f in singles if f is not best and math.isfinite(f.calibration_gap)]
-        seconds = [_fit_second(best, other, ev_cal, trials[0].n_dof) for other in partners]
-        seconds.sort(key=lambda f: (f.calibration_gap, f.objective))
-        if seconds:
-            pairs = [_refine_pair(seconds[0], ev_cal, trials[0].n_dof)] + seconds[1:]
-        for fit in pairs:
-            fit.held_out_gap = ev_held.gap_value(fit.simulation_effects(trials[0].n_dof))
-        pairs.sort(key=lambda f: (f.calibration_gap, f.objective))
-    bar.update()
-    bar.close()
-    verdict, named, chosen = _verdict(significant, singles, pairs, g0_held, config)
+    with Runner(state, workers=workers, scheduler=scheduler, progress=progress) as runner:
+        # nominal runs of every trial (the calibration and held-out units are prefixes)
+        sims = runner.map(_task_simulate, [(i, {}) for i in range(len(trials))],
+                          desc="nominal runs")
+        _prefill(cache, trials, {}, sims)
+        ev_all = Evaluator(setup, full_units, config, plant_ref, cache, setup_for)
+        nominal_all = ev_all.gap({})
+        ev_cal = Evaluator(setup, cal, config, plant_ref, cache, setup_for)
+        ev_held = Evaluator(setup, held, config, plant_ref, cache, setup_for)
+        g0_cal, g0_held = ev_cal.gap_value({}), ev_held.gap_value({})
+        norms = (ev_cal.norms, ev_held.norms)
+        # every effect alone, fitted on the calibration units, with its held-out gap;
+        # the costliest (scalar searches) first so that the workers stay busy
+        order = sorted(config.effects, key=lambda n: cat.get_effect(n).fit != "scalar")
+        singles = runner.map(_task_fit_single, [(n,) + norms for n in order],
+                             desc="effects")
+        n_worker_sims = sum(f.n_evaluations for f in singles)
+        singles.sort(key=lambda f: (f.calibration_gap, f.objective))
+        significant = nominal_all.value > config.significance_gap
+        pairs = []
+        best = next((f for f in singles if f.nameable), None)
+        if significant and best is not None and _residual_needs_pair(best, g0_cal, config):
+            partners = [f.effects[0] for f in singles
+                        if f is not best and math.isfinite(f.calibration_gap)]
+            seconds = runner.map(_task_fit_second, [(best, o) + norms for o in partners],
+                                 desc="pairs")
+            n_worker_sims += sum(f.n_evaluations for f in seconds)
+            seconds.sort(key=lambda f: (f.calibration_gap, f.objective))
+            if seconds:
+                refined = runner.map(_task_refine_pair, [(seconds[0],) + norms],
+                                     desc="pair refit")[0]
+                n_worker_sims += refined.n_evaluations - seconds[0].n_evaluations
+                pairs = [refined] + seconds[1:]
+            pairs.sort(key=lambda f: (f.calibration_gap, f.objective))
+        verdict, named, chosen = _verdict(significant, singles, pairs, g0_held, config)
+        after = None
+        if chosen is not None:
+            effects = chosen.simulation_effects(n_dof)
+            runs = runner.map(_task_simulate, [(i, effects) for i in range(len(trials))],
+                              desc="named model runs")
+            _prefill(cache, trials, effects, runs)
+            after = ev_all.gap(effects)
+    n_parent_sims = len(trials) * (2 if chosen is not None else 1)
     ranking = [_ranking_row(f, g0_cal, g0_held) for f in singles]
     pair_rows = [_ranking_row(f, g0_cal, g0_held) for f in pairs]
-    after = None
-    if chosen is not None:
-        after = ev_all.gap(chosen.simulation_effects(trials[0].n_dof))
     report = DiagnosisReport(
         verdict=verdict, named=named,
         fitted={} if chosen is None else chosen.params,
@@ -530,7 +558,7 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
                "held_out": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
                             for u in held]},
         config=_config_dict(config),
-        n_simulations=ev_all.n_simulations + ev_cal.n_simulations + ev_held.n_simulations,
+        n_simulations=n_parent_sims + n_worker_sims,
         elapsed_s=time.perf_counter() - t0, trials=[t.name for t in trials],
         extras={"nominal_all": nominal_all, "after_all": after, "ev_all": ev_all,
                 "chosen": chosen, "trials": trials})
@@ -541,6 +569,81 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         report.out_dir = Path(out_dir)
         write_report(report, out_dir)
     return report
+
+
+def _prefill(cache: dict, trials, effects: dict, sims) -> None:
+    """Put full-length runs made by the workers into an evaluator cache."""
+    key = _effects_key(effects)
+    for t, sim in zip(trials, sims):
+        cache[(t.name, key)] = (t.n_samples, sim)
+
+
+@dataclass
+class _State:
+    """What every parallel task of one diagnosis reads (sent to each worker once)."""
+
+    token: str
+    trials: list
+    meta: dict
+    arm: object
+    setup: object
+    config: DiagnosisConfig
+    plant: str | None
+    cal: list     # (trial index, start, stop, role)
+    held: list
+
+
+def _worker_evaluators(state: _State, norms_cal: dict, norms_held: dict):
+    """The calibration and held-out evaluators of this worker (one simulation cache),
+    with the normalisation the parent fixed from the nominal model."""
+    def build():
+        setup_for = _setup_factory(state.meta, state.arm, state.setup)
+        cache: dict = {}
+        units = [[Unit(state.trials[i], a, b, role) for i, a, b, role in spec]
+                 for spec in (state.cal, state.held)]
+        return tuple(Evaluator(state.setup, u, state.config, state.plant, cache, setup_for,
+                               norms=n) for u, n in zip(units, (norms_cal, norms_held)))
+    return worker_cache(state, "evaluators", build)
+
+
+def _task_simulate(state: _State, trial_index: int, effects: dict):
+    """Full-length run of one trial with ``effects`` (None when it diverges)."""
+    t = state.trials[trial_index]
+    setup_for = worker_cache(state, "setup_for",
+                             lambda: _setup_factory(state.meta, state.arm, state.setup))
+    return simulate_like(t, setup_for(effects), effects, t.n_samples, plant=state.plant)
+
+
+def _with_held_out(fit: EffectFit, ev_held: Evaluator, n0: int, n_dof: int) -> EffectFit:
+    fit.held_out_gap = ev_held.gap_value(fit.simulation_effects(n_dof))
+    fit.n_evaluations += ev_held.n_simulations - n0
+    return fit
+
+
+def _task_fit_single(state: _State, name: str, norms_cal: dict, norms_held: dict):
+    """Fit one effect alone on the calibration units; its held-out gap."""
+    ev_cal, ev_held = _worker_evaluators(state, norms_cal, norms_held)
+    n_held = ev_held.n_simulations
+    params, gcal, nev, obj = fit_effect(name, ev_cal)
+    fit = EffectFit((name,), {name: _jsonable(params)}, gcal, nev, objective=obj)
+    return _with_held_out(fit, ev_held, n_held, ev_cal.n_dof)
+
+
+def _task_fit_second(state: _State, best: EffectFit, other: str, norms_cal: dict,
+                     norms_held: dict):
+    ev_cal, ev_held = _worker_evaluators(state, norms_cal, norms_held)
+    n_held = ev_held.n_simulations
+    fit = _fit_second(best, other, ev_cal, ev_cal.n_dof)
+    return _with_held_out(fit, ev_held, n_held, ev_cal.n_dof)
+
+
+def _task_refine_pair(state: _State, fit: EffectFit, norms_cal: dict, norms_held: dict):
+    ev_cal, ev_held = _worker_evaluators(state, norms_cal, norms_held)
+    n_held = ev_held.n_simulations
+    refined = _refine_pair(fit, ev_cal, ev_cal.n_dof)
+    if refined is fit:
+        return fit
+    return _with_held_out(refined, ev_held, n_held, ev_cal.n_dof)
 
 
 #: effects that sit between the robot's sensors and the arm: a candidate is simulated
@@ -617,11 +720,11 @@ def _residual_needs_pair(best: EffectFit, g0_cal: float, cfg: DiagnosisConfig) -
     return best.calibration_gap > cfg.significance_gap
 
 
-def _fit_second(best: EffectFit, other: EffectFit, ev_cal: Evaluator,
+def _fit_second(best: EffectFit, other: str, ev_cal: Evaluator,
                 n_dof: int) -> EffectFit:
-    """Forward selection: fit ``other`` on top of the best single (its full bounds: what it
-    fitted alone, under the first effect's gap, says little)."""
-    ea, eb = best.effects[0], other.effects[0]
+    """Forward selection: fit effect ``other`` on top of the best single (its full
+    bounds: what it fitted alone, under the first effect's gap, says little)."""
+    ea, eb = best.effects[0], other
     pa = best.params[ea]
     n0 = ev_cal.n_simulations
     pb, gap, _, obj = fit_effect(eb, ev_cal, base={ea: cat.expand_effect(ea, pa, n_dof)})

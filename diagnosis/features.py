@@ -194,9 +194,10 @@ def trial_features(trial, config: FeatureConfig = FeatureConfig(), *, start: int
     n = data["theta"].shape[1]
     inputs = [trial.perturbed_dof] if trial.perturbed_dof is not None else list(range(1, n + 1))
     rows = []  # (label, value, var_stat, batch values, storage variance)
+    spectra = _Spectra(data, fs, config)
     for k in inputs:
         tag = f"_in{k}" if len(inputs) > 1 else ""
-        rows += _spectral_rows(data, k, n, fs, config, tag, context)
+        rows += _spectral_rows(data, k, n, fs, config, tag, context, spectra)
     rows += _static_rows(data, inputs, n, fs, config, context)
     rows += _grid_rows(data, n, config, context)
     n_b = config.n_batches
@@ -219,19 +220,51 @@ def _band_label(band) -> str:
     return f"{band[0]:g}-{band[1]:g} Hz"
 
 
-def _spectral_rows(data, k, n, fs, cfg, tag, context=None):
+class _Spectra:
+    """Welch (Hann, mean removed per segment, one-sided density) auto- and cross-spectra
+    of a trial's columns from one FFT per column: the same numbers as scipy.signal.welch
+    and csd (tested), which recompute the FFT of x for every pair."""
+
+    def __init__(self, data, fs, cfg):
+        self.fs, self.cfg = fs, cfg
+        self.window = sps.get_window("hann", cfg.nperseg)
+        self.scale = 1.0 / (fs * np.sum(self.window ** 2))
+        self.f = np.fft.rfftfreq(cfg.nperseg, 1.0 / fs)
+        self._data, self._fft = data, {}
+
+    def fft(self, signal, j):
+        key = (signal, j)
+        if key not in self._fft:
+            x = self._data[signal][:, j - 1]
+            step = self.cfg.nperseg - self.cfg.noverlap
+            seg = np.lib.stride_tricks.sliding_window_view(x, self.cfg.nperseg)[::step]
+            seg = seg - seg.mean(axis=1, keepdims=True)
+            self._fft[key] = np.fft.rfft(seg * self.window, axis=1)
+        return self._fft[key]
+
+    def cross(self, a, b):
+        """One-sided cross-spectral density of columns a = (signal, j) and b, conj(Fa) Fb."""
+        p = np.mean(np.conj(self.fft(*a)) * self.fft(*b), axis=0) * self.scale
+        p[1:] *= 2.0
+        if self.cfg.nperseg % 2 == 0:
+            p[-1] /= 2.0
+        return p
+
+    def auto(self, a):
+        return self.cross(a, a).real
+
+
+def _spectral_rows(data, k, n, fs, cfg, tag, context=None, spectra=None):
+    spectra = spectra or _Spectra(data, fs, cfg)
     x = data["tau_delta"][:, k - 1]
     sx = _rounding_psd(context, "tau_delta", k, fs)
-    kw = dict(fs=fs, window="hann", nperseg=cfg.nperseg, noverlap=cfg.noverlap)
-    f, pxx = sps.welch(x, **kw)
+    f, pxx = spectra.f, spectra.auto(("tau_delta", k))
     n_seg = 1 + (x.shape[0] - cfg.nperseg) // (cfg.nperseg - cfg.noverlap)
     rows = []
     for s in SIGNALS:
         for i in range(1, n + 1):
-            y = data[s][:, i - 1]
-            _, pxy = sps.csd(x, y, **kw)
-            _, pyy = sps.welch(y, **kw)
-            pyy = np.maximum(pyy, np.finfo(float).tiny)
+            pxy = spectra.cross(("tau_delta", k), (s, i))
+            pyy = np.maximum(spectra.auto((s, i)), np.finfo(float).tiny)
             h = pxy / pxx
             coh = np.clip(np.abs(pxy) ** 2 / (pxx * pyy), 1e-6, 1.0)
             var_bin = (1.0 - coh) / (2.0 * n_seg * coh)
