@@ -28,9 +28,9 @@ from scipy import signal as sps
 from . import catalogue as cat
 from .arm import (ArmModel, arm_behind_cuff, arm_behind_transmission, estimate_arm,
                   link_inertia)
+from .conventions import apply_declared, check_angles, check_time, check_torque_sign
 from .errors import DiagnosisInputError
 from .features import FeatureConfig, StorageContext, trial_features
-from .storage import find_grid
 from .gap import GapResult, make_normaliser, set_gap
 from .inputs import load_trials
 from .parallel import Runner, worker_cache
@@ -39,6 +39,12 @@ from .simulate import nominal_setup, simulate_like
 VERDICT_EFFECT = "effect"
 VERDICT_NONE = "no significant gap"
 VERDICT_UNEXPLAINED = "unexplained"
+VERDICT_PARTLY = "partly explained"
+#: the only gap was a convention of the files (conventions.py), found and corrected
+VERDICT_CONVENTION = "convention mismatch"
+#: a residual whose coherent (FRF) part differs between perturbation levels of the same
+#: joint by more than this (mean z^2 excess of the level difference) is amplitude-dependent
+AMPLITUDE_GAP = 1.0
 
 
 @dataclass(frozen=True)
@@ -60,7 +66,11 @@ class DiagnosisConfig:
         Nominal gap (all trials) above which a gap is significant; calibrated on
         nominal-vs-nominal sets (docs/diagnosis.md).
     explained_fraction : float
-        Held-out gap reduction an effect needs to be named.
+        Held-out gap reduction an effect needs to be reported at all ("partly
+        explained").
+    confident_fraction : float
+        Held-out gap reduction an effect needs to be named as *the* explanation; between
+        the two the verdict is "partly explained: EFFECT closes N %, the rest lies in ...".
     pair_gain : float
         A pair is preferred to the best single effect when its calibration gap is below
         this fraction of the single's.
@@ -77,6 +87,7 @@ class DiagnosisConfig:
     calibration_trials_per_joint: int = 1
     significance_gap: float = 0.25
     explained_fraction: float = 0.5
+    confident_fraction: float = 0.9
     pair_gain: float = 0.5
     grid_points: int = 5
     refine_iterations: int = 6
@@ -333,10 +344,8 @@ def _grid_estimate(ev: Evaluator) -> dict:
     for u in ev.units:
         t, context = u.trial, ev.contexts[u.trial.name]
         for j in range(t.n_dof):
-            enc.append(find_grid(t.theta[u.start:u.stop, j], context.storage["theta"][j],
-                                 resolvable=context.resolvable["theta"][j]).step)
-            tor.append(find_grid(t.tau_h[u.start:u.stop, j], context.storage["tau_h"][j],
-                                 resolvable=context.resolvable["tau_h"][j]).step)
+            enc.append(context.grid("theta", j, t.theta[u.start:u.stop, j]).step)
+            tor.append(context.grid("tau_h", j, t.tau_h[u.start:u.stop, j]).step)
     enc_deg = float(np.degrees(np.median(enc)))
     return {"encoder_resolution_deg": enc_deg, "torque_resolution_nm": float(np.median(tor))}
 
@@ -398,6 +407,9 @@ class DiagnosisReport:
 
     verdict: str
     named: list
+    summary: str
+    amplitude: dict
+    conventions: list
     fitted: dict
     ranking: list
     pairs: list
@@ -414,7 +426,9 @@ class DiagnosisReport:
 
     def to_dict(self) -> dict:
         return {"format": "arm-impedance-diagnosis/1", "verdict": self.verdict,
-                "named_effects": self.named, "fitted_parameters": self.fitted,
+                "summary": self.summary, "named_effects": self.named,
+                "fitted_parameters": self.fitted, "amplitude_dependence": self.amplitude,
+                "conventions": self.conventions,
                 "ranking": self.ranking, "pairs": self.pairs, "gap": self.gap,
                 "where": self.where, "arm": self.arm, "split": self.split,
                 "trials": self.trials, "n_simulations": self.n_simulations,
@@ -479,8 +493,13 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     unknown = [e for e in config.effects if e not in cat.CATALOGUE]
     if unknown:
         raise DiagnosisInputError(f"config.effects: unknown effect(s) {unknown}")
-    cal, held, rule = split_units(trials, config)
+    trials, findings = apply_declared(trials)
+    trials, found = check_angles(trials)
+    findings += found + check_time(trials)
     arm = estimate_arm(trials)
+    trials, arm, found = check_torque_sign(trials, arm, estimate_arm)
+    findings += found
+    cal, held, rule = split_units(trials, config)
     setup = nominal_setup(trials[0].meta, arm)
     setup_for = _setup_factory(trials[0].meta, arm, setup)
     full_units = [Unit(t, 0, t.n_samples, "all") for t in trials]
@@ -535,10 +554,23 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
             _prefill(cache, trials, effects, runs)
             after = ev_all.gap(effects)
     n_parent_sims = len(trials) * (2 if chosen is not None else 1)
+    residual = after if after is not None else nominal_all
+    amplitude = amplitude_dependence(residual, trials)
+    if amplitude["amplitude_dependent"] and verdict == VERDICT_EFFECT:
+        verdict = VERDICT_PARTLY  # no linear catalogue effect explains that
+    summary = _verdict_text(verdict, named, chosen, g0_held, residual, amplitude)
+    mismatches = [f for f in findings if not f.name.startswith("declared")]
+    if mismatches:
+        if verdict == VERDICT_NONE:
+            verdict = VERDICT_CONVENTION
+        summary = ("set-up/convention mismatch found and corrected: "
+                   + "; ".join(f.text() for f in mismatches) + ". After correction: "
+                   + summary)
     ranking = [_ranking_row(f, g0_cal, g0_held) for f in singles]
     pair_rows = [_ranking_row(f, g0_cal, g0_held) for f in pairs]
     report = DiagnosisReport(
-        verdict=verdict, named=named,
+        verdict=verdict, named=named, summary=summary, amplitude=amplitude,
+        conventions=[f.to_dict() for f in findings],
         fitted={} if chosen is None else chosen.params,
         ranking=ranking, pairs=pair_rows,
         gap={"nominal_all": nominal_all.value, "nominal_calibration": g0_cal,
@@ -548,7 +580,10 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
              "named_held_out_reduction": None if chosen is None else
              _reduction(g0_held, chosen.held_out_gap),
              "named_all": None if after is None else after.value},
-        where={"nominal": where_breakdown(nominal_all),
+        where={"conventions": [f.text() for f in findings],
+               "storage": {t.name: storage_context(t).describe() for t in trials},
+               "grid": _grids(trials),
+               "nominal": where_breakdown(nominal_all),
                "named": None if after is None else where_breakdown(after)},
         arm={**arm.to_dict(), "behind_named_compliance": None if chosen is None else
              _behind_dict(arm, chosen.simulation_effects(trials[0].n_dof), trials[0].meta)},
@@ -760,9 +795,91 @@ def _verdict(significant, singles, pairs, g0_held, cfg):
         return VERDICT_UNEXPLAINED, [], None
     chosen = next((p for p in pairs if p.nameable and p.effects[0] == best.effects[0]
                    and _pair_earns_second(p, best, cfg)), best)
-    if _reduction(g0_held, chosen.held_out_gap) >= cfg.explained_fraction:
+    reduction = _reduction(g0_held, chosen.held_out_gap)
+    if reduction >= cfg.confident_fraction:
         return VERDICT_EFFECT, list(chosen.effects), chosen
+    if reduction >= cfg.explained_fraction:
+        return VERDICT_PARTLY, list(chosen.effects), chosen
     return VERDICT_UNEXPLAINED, [], None
+
+
+def amplitude_dependence(result: GapResult, trials) -> dict:
+    """Does the residual change with the perturbation amplitude?
+
+    For every two trials of the same perturbed joint at different perturbation levels,
+    the coherent (FRF) features of the residual are compared: a model error that is linear
+    leaves the same difference d = measured - model at every amplitude (FRFs do not
+    depend on it), so ``mean(((d_a - d_b)^2 - 2 v_a - 2 v_b) / (sigma_a^2 + sigma_b^2))``
+    is ~0 (v the statistical variances); a nonlinearity the model lacks makes it large. Returns ``{"statistic", "threshold", "amplitude_dependent",
+    "pairs": [{trials, levels, statistic}]}`` (statistic None without two levels).
+    """
+    info = {t.name: (t.perturbed_dof, (t.meta.get("perturbation") or {}).get("level"))
+            for t in trials}
+    by_trial: dict = {}
+    for pos, lab in enumerate(result.labels):
+        if lab[2] == "frf":
+            by_trial.setdefault(lab[0], []).append(pos)
+    pairs = []
+    names = sorted(by_trial)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            (ka, la), (kb, lb) = info[a], info[b]
+            if ka != kb or la is None or lb is None or la == lb:
+                continue
+            pa, pb = by_trial[a], by_trial[b]
+            if len(pa) != len(pb):
+                continue
+            sa, sb = result.sigma[pa], result.sigma[pb]
+            use = np.isfinite(sa) & np.isfinite(sb)
+            if not use.any():
+                continue
+            da, db = result.z[pa][use] * sa[use], result.z[pb][use] * sb[use]
+            va = result.expected[pa][use] * sa[use] ** 2 / 2.0  # e = 2 v / sigma^2
+            vb = result.expected[pb][use] * sb[use] ** 2 / 2.0
+            diff = np.angle(np.exp(1j * (da - db)))  # phases: wrapped; ln|H|: small
+            stat = float(np.mean((diff ** 2 - 2 * va - 2 * vb)
+                                 / (sa[use] ** 2 + sb[use] ** 2)))
+            pairs.append({"trials": [a, b], "levels": [la, lb], "statistic": stat})
+    worst = max((p["statistic"] for p in pairs), default=None)
+    return {"statistic": worst, "threshold": AMPLITUDE_GAP,
+            "amplitude_dependent": bool(worst is not None and worst > AMPLITUDE_GAP),
+            "pairs": pairs}
+
+
+def rest_where(result: GapResult, n: int = 3) -> list:
+    """The feature groups that carry most of a residual, as readable strings."""
+    rows = where_breakdown(result)["top_bands"][:n]
+    return [f"{r['signal']}[{r['joint']}] {r['kind']} {r['band']} (gap {r['gap']:.3g})"
+            for r in rows if r["gap"] > 0]
+
+
+def _grids(trials) -> dict:
+    """The quantisation grid found in theta and tau_h of every trial, with its
+    uncertainty (step 0: none resolvable at the storage precision)."""
+    out = {}
+    for t in trials:
+        context = storage_context(t)
+        out[t.name] = {s: [context.grid(s, j, t.signal(s)[:, j]).to_dict()
+                           for j in range(t.n_dof)] for s in ("theta", "tau_h")}
+    return out
+
+
+def _verdict_text(verdict, named, chosen, g0_held, residual, amplitude) -> str:
+    """One sentence: the verdict, what the named effect closes, where the rest lies."""
+    amp = (" The residual is amplitude-dependent (its FRF part differs between "
+           "perturbation levels): no linear catalogue effect explains that."
+           if amplitude["amplitude_dependent"] else "")
+    if verdict == VERDICT_NONE:
+        return "no significant gap: the nominal model reproduces the trials within noise."
+    if chosen is None:
+        return ("unexplained: no catalogue effect closes half of the held-out gap; the gap "
+                "lies in " + "; ".join(rest_where(residual)) + "." + amp)
+    share = 100 * _reduction(g0_held, chosen.held_out_gap)
+    text = f"{' + '.join(named)} closes {share:.0f} % of the held-out gap"
+    if verdict == VERDICT_PARTLY:
+        return ("partly explained: " + text + "; the rest lies in "
+                + "; ".join(rest_where(residual)) + "." + amp)
+    return f"{verdict}: {text}." + amp
 
 
 def _pair_earns_second(pair: EffectFit, single: EffectFit, cfg: DiagnosisConfig) -> bool:

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal as sps
 
-from .storage import Storage, detect_storage, find_grid, resolvable_step
+from .storage import Grid, Storage, detect_storage, find_grid, resolvable_step
 
 SIGNALS = ("theta", "tau_h", "tau_m")
 
@@ -137,11 +137,15 @@ class StorageContext:
         Mean rounding variance step^2 / 12 of each column [unit^2].
     resolvable : dict signal -> ndarray (n,)
         Smallest quantisation step the storage can reveal per column (grid feature).
+    transforms : dict signal -> (scale, offset)
+        The trial was corrected after reading (conventions.py): value = raw * scale -
+        offset; the storage applies to the raw numbers.
     """
 
     storage: dict
     rounding_var: dict
     resolvable: dict
+    transforms: dict = field(default_factory=dict)
 
     @classmethod
     def from_trial(cls, trial) -> "StorageContext":
@@ -163,9 +167,35 @@ class StorageContext:
         changes = {}
         for s in SIGNALS:
             x = np.asarray(trial.signal(s), dtype=float)
-            changes[s] = np.column_stack([c.apply(x[:, j])
-                                          for j, c in enumerate(self.storage[s])])
+            scale, offset = self.transforms.get(s, (1.0, 0.0))
+            raw = (x + offset) / scale
+            stored = np.column_stack([c.apply(raw[:, j])
+                                      for j, c in enumerate(self.storage[s])])
+            changes[s] = stored * scale - offset
         return dataclasses.replace(trial, **changes)
+
+    def grid(self, s: str, j: int, x) -> "Grid":
+        """The quantisation grid of column s[j] (0-based j) of samples ``x`` (measured, or
+        a simulation stored alike), read on the raw numbers (storage.find_grid)."""
+        scale, offset = self.transforms.get(s, (1.0, 0.0))
+        off = np.broadcast_to(np.asarray(offset, dtype=float), (j + 1,))[j] if np.ndim(
+            offset) else offset
+        raw = (np.asarray(x, dtype=float) + off) / scale
+        g = find_grid(raw, self.storage[s][j], resolvable=self.resolvable[s][j] / abs(scale))
+        return Grid(g.step * abs(scale), g.sigma * abs(scale), g.resolvable * abs(scale))
+
+    def converted(self, scale: dict, offset: dict) -> "StorageContext":
+        """The context of the trial corrected as value = raw * scale - offset."""
+        if not scale and not offset:
+            return self
+        var, res, tr = dict(self.rounding_var), dict(self.resolvable), dict(self.transforms)
+        for s in set(scale) | set(offset):
+            a, b = float(scale.get(s, 1.0)), np.asarray(offset.get(s, 0.0), dtype=float)
+            a0, b0 = tr.get(s, (1.0, 0.0))
+            tr[s] = (a0 * a, b0 * a + b)
+            var[s] = var[s] * a * a
+            res[s] = res[s] * abs(a)
+        return StorageContext(self.storage, var, res, tr)
 
     def describe(self) -> dict:
         """signal -> list of the storage of each joint's column (for the report)."""
@@ -359,8 +389,7 @@ def _grid_rows(data, n, cfg, context=None):
             if context is None:
                 grid = find_grid(x)
             else:
-                grid = find_grid(x, context.storage[s][j - 1],
-                                 resolvable=context.resolvable[s][j - 1])
+                grid = context.grid(s, j - 1, x)
             # no grid: the smallest step the storage could have revealed (a bound)
             step = grid.step if grid.step > 0 else grid.resolvable
             step = max(step, cfg.grid_floor[s])

@@ -107,12 +107,15 @@ class GapResult:
     expected : ndarray
     labels : list of tuple
         ``(trial, level, kind, signal, joint, band, part)`` per feature.
+    sigma : ndarray
+        The normalising uncertainty of every feature (z * sigma is the difference).
     """
 
     value: float
     z: np.ndarray
     expected: np.ndarray
     labels: list
+    sigma: np.ndarray | None = None
 
     @property
     def excess(self) -> float:
@@ -149,11 +152,13 @@ def set_gap(pairs) -> GapResult:
     pairs : iterable of (name, level, measured FeatureVector, simulated FeatureVector,
         Normaliser)
     """
-    zs, es, labels = [], [], []
+    zs, es, ss, labels = [], [], [], []
     for name, level, meas, sim, norm in pairs:
         zs.append(z_scores(meas, sim, norm))
         es.append(norm.expected)
+        ss.append(norm.sigma)
         labels += [(name, level) + tuple(lab) for lab in meas.labels]
     z = np.concatenate(zs) if zs else np.zeros(0)
     e = np.concatenate(es) if es else np.zeros(0)
-    return GapResult(value=gap_value(z, e), z=z, expected=e, labels=labels)
+    sigma = np.concatenate(ss) if ss else np.zeros(0)
+    return GapResult(value=gap_value(z, e), z=z, expected=e, labels=labels, sigma=sigma)

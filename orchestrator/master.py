@@ -131,7 +131,7 @@ class DelayLine:
 
 
 def run_closed_loop(io, controller, sampler, tau_delta, recorder, *, control_period,
-                    n_decimation=1, delay=None, t0=0.0, condition="") -> None:
+                    n_decimation=1, delay=None, t0=0.0, condition="", human=None) -> None:
     """Run the sampled closed loop for ``len(tau_delta)`` control samples.
 
     At sample n (t = t0 + n Ts): read the plant outputs (state at the end of the previous
@@ -157,6 +157,12 @@ def run_closed_loop(io, controller, sampler, tau_delta, recorder, *, control_per
     t0 : float [s]
     condition : str
         Named in a DivergenceError.
+    human : callable, optional
+        ``human(n, outputs) -> list`` [N m]: an active torque of the limb at sample n from
+        the true plant outputs (e.g. a reflex), held over the interval. The limb is
+        rigidly held, so it adds to the applied torque; the torque sensor between robot
+        and limb reads the plant's passive tau_h minus the torque the limb applied over
+        the interval before (a test model of effects outside the catalogue).
 
     Raises
     ------
@@ -172,15 +178,24 @@ def run_closed_loop(io, controller, sampler, tau_delta, recorder, *, control_per
     vr_out, n_out, val_out = io.vr_out, io.n_out, io.val_out
     sample, control, record = sampler.sample, controller.step, recorder.record
     push = None if delay is None else delay.push
+    n_dof = len(val_in)
+    active = [0.0] * n_dof
     n = 0
     try:
         for n, d in enumerate(tau_delta):
             if get_real(comp, vr_out, n_out, val_out) > 1:
                 raise FMUCallError(f"fmi2GetReal failed at t={t0 + n * control_period!r} s")
-            measured = sample(n, val_out[:])
+            outputs = val_out[:]
+            if human is not None:
+                outputs[n_dof:2 * n_dof] = [x - a for x, a in
+                                            zip(outputs[n_dof:2 * n_dof], active)]
+                active = list(human(n, outputs))
+            measured = sample(n, outputs)
             tau_m = control(measured, d)
             record(measured, tau_m)
             val_in[:] = tau_m if push is None else push(tau_m)
+            if human is not None:
+                val_in[:] = [x + a for x, a in zip(val_in, active)]
             if set_real(comp, vr_in, n_in, val_in) > 1:
                 raise FMUCallError(f"fmi2SetReal failed at t={t0 + n * control_period!r} s")
             k = n * n_decimation

@@ -52,7 +52,7 @@ def _resolve_plant(plant) -> Plant:
 
 def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
                    duration_s=50.0, effects=None, plant=None, parameters=None,
-                   communication_step_s=None, name="") -> Trial:
+                   communication_step_s=None, name="", human=None) -> Trial:
     """Simulate one trial of the closed loop (IMBIC at the control rate on a plant FMU).
 
     Parameters
@@ -79,6 +79,10 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
         Communication step (default: the control period); it must divide the period.
     name : str
         Trial name (used in error messages and as ``Trial.name``).
+    human : callable, optional
+        An active torque of the limb, ``human(n, outputs)`` (master.run_closed_loop);
+        a test model outside the catalogue, recorded as ``repr(human)`` under
+        ``meta["simulation"]["human"]``.
 
     Returns
     -------
@@ -113,7 +117,8 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
     recorder = Recorder(("measured", "tau_m"))
     condition = _condition(name, setup, perturbed_dof, pert_meta, hidden.normalized)
     run_closed_loop(plant.io, controller, sampler, tau_delta.tolist(), recorder,
-                    control_period=ts, n_decimation=n_dec, delay=delay, condition=condition)
+                    control_period=ts, n_decimation=n_dec, delay=delay, condition=condition,
+                    human=human)
     rec = recorder.arrays()
     rec = {"tau_delta": tau_delta, "theta": rec["measured"][:, :n],
            "tau_h": rec["measured"][:, n:], "tau_m": rec["tau_m"]}
@@ -135,6 +140,8 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
         "seed": pert_meta.get("seed"),
         "noise_seed": noise_seed,
     }
+    if human is not None:
+        meta["simulation"]["human"] = repr(human)
     t = np.arange(tau_delta.shape[0]) / fs
     return Trial(meta=meta, t=t, name=name, **rec)
 
