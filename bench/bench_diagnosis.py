@@ -13,6 +13,8 @@ default workers and with one process, side by side, and prints the speed-up.
 
     python bench/bench_diagnosis.py                          # ~70 sets, about an hour on 2 cores
     python bench/bench_diagnosis.py --timing-only --repeat 3 # 8-trial timing, 2 workers vs 1
+"""
+
 from __future__ import annotations
 
 import argparse
