@@ -114,9 +114,9 @@ def detect_storage(x) -> Storage:
 
     Tries significant digits 1-15 and fixed decimals 0-15 (a value counts as
     representable when it is within a few float64 ulps of the decimal); of those that fit,
-    the one with the larger median step. Else float32 when every value is a single-
-    precision number; else float64. A decimal fit of >= 8 digits whose values all lie
-    within half a step of a float32 is reported as float32 printed at those digits.
+    the one with the larger mean log step. Else float32 when every value is a single-
+    precision number; else float64. Decimal values that all lie within half a printed
+    step of a float32 whose spacing is the coarser are float32 printed at those digits.
 
     Parameters
     ----------
@@ -148,11 +148,17 @@ def detect_storage(x) -> Storage:
             break
     if fits:
         # the coarser one; on a tie fixed decimals (one uniform step explains it)
-        best = max(fits, key=lambda s: (float(np.median(s.step(nz))), s.kind == "decimals"))
+        best = max(fits, key=lambda s: (round(float(np.mean(np.log10(s.step(nz)))), 9),
+                                        s.kind == "decimals"))
+        # single-precision values printed with enough digits to tell them apart: every
+        # value within half a printed step of a float32, whose spacing is the coarser
         f32 = nz.astype(np.float32).astype(float)
-        if best.kind == "significant" and best.digits >= 8 and np.all(
-                np.abs(f32 - nz) <= 0.5 * best.step(nz) + 4 * EPS * ax):
-            return Storage("float32", best.digits)
+        spacing32 = np.abs(np.spacing(nz.astype(np.float32))).astype(float)
+        printed = np.max([f.step(nz) for f in fits], axis=0)
+        if np.all(np.abs(f32 - nz) <= 0.5 * printed + 4 * EPS * ax) and \
+                np.median(spacing32) > np.median(best.step(nz)):
+            sig = next((f.digits for f in fits if f.kind == "significant"), None)
+            return Storage("float32", sig)
         return best
     if np.all(nz.astype(np.float32).astype(float) == nz):
         return Storage("float32")
@@ -222,11 +228,17 @@ def find_grid(x, storage: Storage | None = None, *, resolvable: float | None = N
     if u.size < 3:
         return none
     du = np.diff(u)
-    decimal = _decimal_grid(u, du, storage)
-    if decimal is not None:
-        return Grid(decimal, 0.0, limit)
+    grid = _tolerant_grid(u, du, storage, limit)
+    if grid is None:
+        decimal = _decimal_grid(u, du, storage)
+        grid = None if decimal is None else Grid(decimal, 0.0, limit)
+    return none if grid is None else grid
+
+
+def _tolerant_grid(u, du, storage: Storage, limit: float) -> Grid | None:
+    """The grid of the distinct stored values ``u`` read within their rounding."""
     if not du.min() > 0 or du.min() < limit:
-        return none
+        return None
     half = np.maximum(0.5 * storage.step(u), 4 * EPS * np.abs(u).max())
     var_du = (half[:-1] ** 2 + half[1:] ** 2) / 3.0  # two uniform roundings
     # first guess: the most precisely stored of the smallest differences
@@ -236,7 +248,7 @@ def find_grid(x, storage: Storage | None = None, *, resolvable: float | None = N
     for _ in range(3):  # weighted least squares over all differences, du = k r
         k = np.rint(du / r)
         if k.max() > 1e7 or np.any(k < 1):
-            return none
+            return None
         r = float(np.sum(w * k * du) / np.sum(w * k * k))
     k = np.rint(du / r)
     sigma = float(1.0 / math.sqrt(np.sum(w * k * k)))
@@ -244,7 +256,7 @@ def find_grid(x, storage: Storage | None = None, *, resolvable: float | None = N
     tol = (1.01 * (half[:-1] + half[1:]) + 5.0 * k * sigma
            + 16 * EPS * np.maximum(np.abs(u[:-1]), np.abs(u[1:])))
     if np.any(k < 1) or np.any(np.abs(du - k * r) > tol):
-        return none
+        return None
     return Grid(r, sigma, limit)
 
 
@@ -252,7 +264,9 @@ def _decimal_grid(u, du, storage: Storage) -> float | None:
     """A grid that is itself a multiple of a decimal storage step (e.g. 0.005 N m stored
     with 3 decimals, or written bit-exact but decimal-valued): every difference is an
     integer number m of the finest storage step, and the samples lie on a grid when the
-    greatest common divisor of the m is 2 or more (unquantised samples give 1)."""
+    greatest common divisor of the m is 2 or more (5 with fewer than 20 distinct values;
+    unquantised samples give 1). Tried
+    only when the grid is too fine for :func:`_tolerant_grid`."""
     if storage.kind != "decimals":  # a uniform step: multi-scale steps share factors
         return None
     steps = storage.step(u)
@@ -263,4 +277,6 @@ def _decimal_grid(u, du, storage: Storage) -> float | None:
     if np.any(np.abs(du - m * unit) > 0.01 * unit + 16 * EPS * np.abs(u[1:])):
         return None
     g = int(np.gcd.reduce(m.astype(np.int64)))
-    return g * unit if g >= 2 else None
+    # among a few rounded differences a common factor of 2-4 arises by chance; among 20
+    # or more distinct values it does not (probability 2^-19)
+    return float(g * unit) if g >= 5 or (g >= 2 and u.size >= 20) else None
