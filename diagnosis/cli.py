@@ -26,6 +26,9 @@ def register(subparsers) -> None:
                    help="local processes for the simulations (default: one per core)")
     p.add_argument("--scheduler", default=None,
                    help="Dask distributed scheduler address (e.g. tcp://127.0.0.1:8786)")
+    p.add_argument("--rk4-step", type=float, default=None,
+                   help="the plant's internal RK4 step [s]; must divide the sample period "
+                        "(default: the plant's, or the nearest step that divides it)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_diagnose)
 
@@ -57,9 +60,10 @@ def _diagnose(args) -> int:
     config = DiagnosisConfig(effects=_effects(args.effects))
     report = diagnose(args.folder, args.out, config=config, plant=args.fmu,
                       progress=not args.quiet, workers=args.workers,
-                      scheduler=args.scheduler)
+                      scheduler=args.scheduler, rk4_step=args.rk4_step)
     named = " + ".join(report.named)
     print(f"verdict: {report.verdict}{': ' + named if named else ''}")
+    print(report.summary)
     print(f"nominal gap {report.gap['nominal_all']:.3g} (threshold "
           f"{report.gap['significance_threshold']:.3g}); report: {Path(args.out) / 'report.md'}")
     return 0

@@ -102,7 +102,7 @@ def check_angles(trials) -> tuple[list, list]:
     theta = np.vstack([t.theta for t in trials])
     mean = theta.mean(axis=0)
     spread = np.max(np.abs(theta - mean), axis=0)
-    degrees = bool(np.all(spread > ANGLE_LIMIT_RAD)
+    degrees = bool(np.any(spread > ANGLE_LIMIT_RAD)
                    and np.all(np.radians(spread) < PLAUSIBLE_DEVIATION_RAD))
     scale = math.pi / 180.0 if degrees else 1.0
     if degrees:

@@ -34,7 +34,7 @@ from .features import FeatureConfig, StorageContext, trial_features
 from .gap import GapResult, make_normaliser, set_gap
 from .inputs import load_trials
 from .parallel import Runner, worker_cache
-from .simulate import nominal_setup, simulate_like
+from .simulate import NUMERICAL_RETRY_FACTOR, nominal_setup, simulate_like
 
 VERDICT_EFFECT = "effect"
 VERDICT_NONE = "no significant gap"
@@ -178,8 +178,10 @@ class Evaluator:
     """
 
     def __init__(self, setup, units, cfg: DiagnosisConfig, plant=None,
-                 cache: dict | None = None, setup_for=None, norms: dict | None = None):
+                 cache: dict | None = None, setup_for=None, norms: dict | None = None,
+                 rk4_step: float | None = None):
         self.setup, self.units, self.cfg, self.plant = setup, units, cfg, plant
+        self.rk4_step = rk4_step
         # the set-up a candidate is simulated with (the arm behind a candidate cuff)
         self.setup_for = setup_for or (lambda effects: setup)
         self.n_dof = units[0].trial.n_dof
@@ -197,8 +199,10 @@ class Evaluator:
         nominal = {u.key: self.features(u, {}) for u in units}
         if any(v is None for v in nominal.values()):
             bad = [k for k, v in nominal.items() if v is None]
-            raise DiagnosisInputError(f"the nominal model diverges on {bad}: the declared "
-                                      f"set-up cannot reproduce these trials")
+            raise DiagnosisInputError(
+                f"the nominal model diverges on {bad}, also with the plant's RK4 step "
+                f"divided by {NUMERICAL_RETRY_FACTOR} (so not a numerical failure): the "
+                f"declared set-up cannot reproduce these trials")
         self.norms = {u.key: make_normaliser(self.measured[u.key], nominal[u.key],
                                              cfg.features) for u in units}
 
@@ -213,7 +217,7 @@ class Evaluator:
         # a model that diverged once is not run again (it is unstable)
         if have is None or (have[1] is not None and have[0] < unit.stop):
             sim = simulate_like(unit.trial, self.setup_for(effects), effects, unit.stop,
-                                plant=self.plant)
+                                plant=self.plant, rk4_step=self.rk4_step)
             self._sims[key] = (unit.stop, sim)
             self.n_simulations += 1
         return self._sims[key][1]
@@ -410,6 +414,7 @@ class DiagnosisReport:
     summary: str
     amplitude: dict
     conventions: list
+    numerics: list
     fitted: dict
     ranking: list
     pairs: list
@@ -428,7 +433,7 @@ class DiagnosisReport:
         return {"format": "arm-impedance-diagnosis/1", "verdict": self.verdict,
                 "summary": self.summary, "named_effects": self.named,
                 "fitted_parameters": self.fitted, "amplitude_dependence": self.amplitude,
-                "conventions": self.conventions,
+                "conventions": self.conventions, "numerical_retries": self.numerics,
                 "ranking": self.ranking, "pairs": self.pairs, "gap": self.gap,
                 "where": self.where, "arm": self.arm, "split": self.split,
                 "trials": self.trials, "n_simulations": self.n_simulations,
@@ -453,7 +458,7 @@ def _jsonable(params: dict) -> dict:
 
 def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(),
              plant=None, progress: bool = True, workers: int | None = None,
-             scheduler=None) -> DiagnosisReport:
+             scheduler=None, rk4_step: float | None = None) -> DiagnosisReport:
     """Diagnose the sim-to-real gap of a folder of measured trials.
 
     Parameters
@@ -473,6 +478,10 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         process). The result does not depend on it.
     scheduler : str or distributed.Client, optional
         Dask scheduler address (e.g. ``tcp://HOST:8786``): run on that cluster instead.
+    rk4_step : float [s], optional
+        The plant's internal RK4 step; it must divide the trials' sample period (refused
+        up front with both values). Default: the plant's, or the step nearest it that
+        divides the period (any sample rate).
 
     Returns
     -------
@@ -493,6 +502,13 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     unknown = [e for e in config.effects if e not in cat.CATALOGUE]
     if unknown:
         raise DiagnosisInputError(f"config.effects: unknown effect(s) {unknown}")
+    if rk4_step is not None:
+        from orchestrator.trial import check_rk4_step
+        try:
+            check_rk4_step(rk4_step, 1.0 / trials[0].fs)
+        except ValueError as exc:
+            raise DiagnosisInputError(f"{trials[0].name}: fs = {trials[0].fs:g} Hz: "
+                                      f"{exc}") from None
     trials, findings = apply_declared(trials)
     trials, found = check_angles(trials)
     findings += found + check_time(trials)
@@ -509,17 +525,23 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     state = _State(token=uuid.uuid4().hex, trials=trials, meta=trials[0].meta, arm=arm,
                    setup=setup, config=config, plant=None if plant_ref is None else str(plant_ref),
                    cal=[(index[u.trial.name], u.start, u.stop, u.role) for u in cal],
-                   held=[(index[u.trial.name], u.start, u.stop, u.role) for u in held])
+                   held=[(index[u.trial.name], u.start, u.stop, u.role) for u in held],
+                   rk4_step=rk4_step)
     cache: dict = {}
     with Runner(state, workers=workers, scheduler=scheduler, progress=progress) as runner:
         # nominal runs of every trial (the calibration and held-out units are prefixes)
         sims = runner.map(_task_simulate, [(i, {}) for i in range(len(trials))],
                           desc="nominal runs")
         _prefill(cache, trials, {}, sims)
-        ev_all = Evaluator(setup, full_units, config, plant_ref, cache, setup_for)
+        numerics = [{"trial": t.name, **sim.meta["simulation"]["numerical_retry"]}
+                    for t, sim in zip(trials, sims)
+                    if sim is not None and "numerical_retry" in sim.meta["simulation"]]
+        ev_all = Evaluator(setup, full_units, config, plant_ref, cache, setup_for,
+                           rk4_step=rk4_step)
         nominal_all = ev_all.gap({})
-        ev_cal = Evaluator(setup, cal, config, plant_ref, cache, setup_for)
-        ev_held = Evaluator(setup, held, config, plant_ref, cache, setup_for)
+        ev_cal = Evaluator(setup, cal, config, plant_ref, cache, setup_for, rk4_step=rk4_step)
+        ev_held = Evaluator(setup, held, config, plant_ref, cache, setup_for,
+                            rk4_step=rk4_step)
         g0_cal, g0_held = ev_cal.gap_value({}), ev_held.gap_value({})
         norms = (ev_cal.norms, ev_held.norms)
         # every effect alone, fitted on the calibration units, with its held-out gap;
@@ -559,6 +581,11 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     if amplitude["amplitude_dependent"] and verdict == VERDICT_EFFECT:
         verdict = VERDICT_PARTLY  # no linear catalogue effect explains that
     summary = _verdict_text(verdict, named, chosen, g0_held, residual, amplitude)
+    if numerics:
+        summary += (" Numerical: the plant's RK4 step failed on "
+                    + ", ".join(f"{n['trial']} at {n['failed_rk4_step']:.3g} s" for n in numerics)
+                    + f" and was run at {numerics[0]['rk4_step']:.3g} s (a numerical failure, "
+                    "not a model mismatch).")
     mismatches = [f for f in findings if not f.name.startswith("declared")]
     if mismatches:
         if verdict == VERDICT_NONE:
@@ -570,7 +597,7 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     pair_rows = [_ranking_row(f, g0_cal, g0_held) for f in pairs]
     report = DiagnosisReport(
         verdict=verdict, named=named, summary=summary, amplitude=amplitude,
-        conventions=[f.to_dict() for f in findings],
+        conventions=[f.to_dict() for f in findings], numerics=numerics,
         fitted={} if chosen is None else chosen.params,
         ranking=ranking, pairs=pair_rows,
         gap={"nominal_all": nominal_all.value, "nominal_calibration": g0_cal,
@@ -626,6 +653,7 @@ class _State:
     plant: str | None
     cal: list     # (trial index, start, stop, role)
     held: list
+    rk4_step: float | None = None
 
 
 def _worker_evaluators(state: _State, norms_cal: dict, norms_held: dict):
@@ -637,7 +665,8 @@ def _worker_evaluators(state: _State, norms_cal: dict, norms_held: dict):
         units = [[Unit(state.trials[i], a, b, role) for i, a, b, role in spec]
                  for spec in (state.cal, state.held)]
         return tuple(Evaluator(state.setup, u, state.config, state.plant, cache, setup_for,
-                               norms=n) for u, n in zip(units, (norms_cal, norms_held)))
+                               norms=n, rk4_step=state.rk4_step)
+                     for u, n in zip(units, (norms_cal, norms_held)))
     return worker_cache(state, "evaluators", build)
 
 
@@ -646,7 +675,8 @@ def _task_simulate(state: _State, trial_index: int, effects: dict):
     t = state.trials[trial_index]
     setup_for = worker_cache(state, "setup_for",
                              lambda: _setup_factory(state.meta, state.arm, state.setup))
-    return simulate_like(t, setup_for(effects), effects, t.n_samples, plant=state.plant)
+    return simulate_like(t, setup_for(effects), effects, t.n_samples, plant=state.plant,
+                         rk4_step=state.rk4_step)
 
 
 def _with_held_out(fit: EffectFit, ev_held: Evaluator, n0: int, n_dof: int) -> EffectFit:

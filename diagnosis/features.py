@@ -178,8 +178,7 @@ class StorageContext:
         """The quantisation grid of column s[j] (0-based j) of samples ``x`` (measured, or
         a simulation stored alike), read on the raw numbers (storage.find_grid)."""
         scale, offset = self.transforms.get(s, (1.0, 0.0))
-        off = np.broadcast_to(np.asarray(offset, dtype=float), (j + 1,))[j] if np.ndim(
-            offset) else offset
+        off = float(np.asarray(offset, dtype=float)[j]) if np.ndim(offset) else float(offset)
         raw = (np.asarray(x, dtype=float) + off) / scale
         g = find_grid(raw, self.storage[s][j], resolvable=self.resolvable[s][j] / abs(scale))
         return Grid(g.step * abs(scale), g.sigma * abs(scale), g.resolvable * abs(scale))

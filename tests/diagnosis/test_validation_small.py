@@ -141,3 +141,27 @@ def test_the_verdict_does_not_depend_on_how_the_numbers_were_stored(variant, rep
     storage = other.where["storage"]
     assert any("float64" not in " ".join(v for cols in s.values() for v in cols)
                for s in storage.values())
+
+
+@pytest.mark.parametrize("convention", ["absolute angles + torque sign", "degrees"])
+def test_a_convention_of_the_files_is_a_named_finding_not_a_gap(convention, sets,
+                                                                tmp_path_factory):
+    """Issue 8, item 2: the nominal set re-written as a lab might have logged it."""
+    import numpy as np
+
+    import trialformat as tf
+    from diagnosis import VERDICT_CONVENTION
+    out = tmp_path_factory.mktemp("convention")
+    for t in tf.read_trials(sets["nominal"]):
+        if convention == "degrees":
+            t = dataclasses.replace(t, theta=np.degrees(t.theta))
+        else:
+            t = dataclasses.replace(t, theta=t.theta + np.radians(t.meta["posture_deg"]),
+                                    tau_h=-t.tau_h)
+        tf.write_trial(out / t.name, t)
+    report = diagnose(out, out / "report", progress=False, config=CONFIG_NOMINAL)
+    expected = {"degrees": {"angles in degrees"},
+                "absolute angles + torque sign": {"angles absolute", "torque sign reversed"}}
+    assert {c["name"] for c in report.conventions} == expected[convention]
+    assert report.verdict == VERDICT_CONVENTION
+    assert report.gap["nominal_all"] <= report.gap["significance_threshold"]
