@@ -165,3 +165,15 @@ def test_a_convention_of_the_files_is_a_named_finding_not_a_gap(convention, sets
     assert {c["name"] for c in report.conventions} == expected[convention]
     assert report.verdict == VERDICT_CONVENTION
     assert report.gap["nominal_all"] <= report.gap["significance_threshold"]
+
+
+def test_one_process_gives_the_same_diagnosis_as_the_parallel_one(sets, reports,
+                                                                  tmp_path_factory):
+    """Issue 8, item 6: parallel simulations change the time, not the result."""
+    out = tmp_path_factory.mktemp("one_process")
+    single = diagnose(sets["gravity"], out, progress=False, config=CONFIG, workers=1)
+    parallel = reports["gravity"]
+    assert (single.verdict, single.named, single.fitted) == \
+        (parallel.verdict, parallel.named, parallel.fitted)
+    assert [r["calibration_gap"] for r in single.ranking] == \
+        [r["calibration_gap"] for r in parallel.ranking]
