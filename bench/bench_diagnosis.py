@@ -62,6 +62,32 @@ def timing_run(work: Path, repeat: int = 1, workers: int | None = None) -> dict:
             "load_average_1min_at_end": os.getloadavg()[0]}
 
 
+INVARIANCE_CASES = (
+    ("quantization", (("quantization", {"encoder_resolution_deg": 0.0031,
+                                        "torque_resolution_nm": 0.0123}),), 0),
+    ("nominal-r2", (), 2), ("nominal-r0", (), 0),
+    ("gravity", (("gravity", {"tilt_deg": 4.0}),), 1))
+
+
+def invariance_run(work: Path) -> dict:
+    """The nominal gap of one 2 x 12 s set per case written in every representation
+    (representation.REPRESENTATIONS), with its part per feature kind."""
+    from diagnosis.representation import REPRESENTATIONS
+    out = {}
+    for name, effects, resolution in INVARIANCE_CASES:
+        rows = {}
+        for rep in REPRESENTATIONS:
+            spec = SetSpec(f"inv-{name}-{rep}", effects, seeds=(77,), duration_s=12.0,
+                           resolution_level=resolution, representation=rep)
+            g = nominal_gap(make_set(spec, work / "sets"))
+            kinds = {k[0]: v for k, v in g.breakdown("kind").items()}
+            rows[rep] = {"gap": g.value, "excess": g.excess, "by_kind": kinds}
+            print(f"{name:>14} {rep:>12}: gap {g.value:9.3f}  " + "  ".join(
+                f"{k} {v:8.2f}" for k, v in kinds.items()), flush=True)
+        out[name] = rows
+    return out
+
+
 #: effects not detected at the low end of their realistic range: also tried stronger
 #: (multiples of the low end) to locate their floor
 STRONGER_FLOOR_POINTS = {"torque_sensor_lag": (2.0, 3.0, 4.0, 6.0)}
@@ -152,6 +178,9 @@ def main(argv=None) -> int:
     p.add_argument("--timing-only", action="store_true",
                    help="only the 8-trial timing (writes bench/results/diagnosis_timing.json)")
     p.add_argument("--repeat", type=int, default=1, help="timing repetitions")
+    p.add_argument("--invariance", action="store_true",
+                   help="only the nominal gap of 4 sets in every representation "
+                        "(writes bench/results/diagnosis_invariance.json)")
     p.add_argument("--duration", type=float, default=12.0, help="trial length [s]")
     p.add_argument("--seed", type=int, default=2024)
     p.add_argument("--timing", action="store_true", help="also time an 8-trial diagnosis")
@@ -163,6 +192,11 @@ def main(argv=None) -> int:
                    help="with --calibrate: nominal-vs-nominal gaps only")
     args = p.parse_args(argv)
     work = Path(args.work)
+    if args.invariance:
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        inv = invariance_run(work)
+        (RESULTS / "diagnosis_invariance.json").write_text(json.dumps(_clean(inv), indent=2))
+        return 0
     if args.timing_only:
         tm = timing_run(work, args.repeat, args.workers)
         RESULTS.mkdir(parents=True, exist_ok=True)
