@@ -42,6 +42,9 @@ def register(subparsers) -> None:
                    help="sets with an effect outside the catalogue")
     v.add_argument("--duration", type=float, default=12.0, help="trial length [s]")
     v.add_argument("--seed", type=int, default=2024, help="seed of the draws")
+    v.add_argument("--workers", type=int, default=None,
+                   help="local processes per diagnosis (default: one per core)")
+    v.add_argument("--scheduler", default=None, help="Dask distributed scheduler address")
     v.add_argument("--quiet", action="store_true", help="no progress bars")
     v.set_defaults(func=_validate)
 
@@ -76,7 +79,8 @@ def _validate(args) -> int:
     specs = draw_specs(np.random.default_rng(args.seed), n_per_effect=args.per_effect,
                        n_nominal=args.nominal, n_pairs=args.pairs, n_outside=args.outside,
                        duration_s=args.duration)
-    result = run_validation(specs, args.out, progress=not args.quiet)
+    result = run_validation(specs, args.out, progress=not args.quiet,
+                            workers=args.workers, scheduler=args.scheduler)
     print(result["table_markdown"])
     print(f"score table: {Path(args.out) / 'score.md'}")
     return 0
