@@ -415,6 +415,7 @@ class DiagnosisReport:
     amplitude: dict
     conventions: list
     numerics: list
+    timing: dict
     fitted: dict
     ranking: list
     pairs: list
@@ -434,6 +435,7 @@ class DiagnosisReport:
                 "summary": self.summary, "named_effects": self.named,
                 "fitted_parameters": self.fitted, "amplitude_dependence": self.amplitude,
                 "conventions": self.conventions, "numerical_retries": self.numerics,
+                "timing": self.timing,
                 "ranking": self.ranking, "pairs": self.pairs, "gap": self.gap,
                 "where": self.where, "arm": self.arm, "split": self.split,
                 "trials": self.trials, "n_simulations": self.n_simulations,
@@ -575,6 +577,7 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
                               desc="named model runs")
             _prefill(cache, trials, effects, runs)
             after = ev_all.gap(effects)
+        timings = list(runner.timings)
     n_parent_sims = len(trials) * (2 if chosen is not None else 1)
     residual = after if after is not None else nominal_all
     amplitude = amplitude_dependence(residual, trials)
@@ -598,6 +601,8 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     report = DiagnosisReport(
         verdict=verdict, named=named, summary=summary, amplitude=amplitude,
         conventions=[f.to_dict() for f in findings], numerics=numerics,
+        timing={"workers": workers, "scheduler": None if scheduler is None else str(scheduler),
+                "phases": timings},
         fitted={} if chosen is None else chosen.params,
         ranking=ranking, pairs=pair_rows,
         gap={"nominal_all": nominal_all.value, "nominal_calibration": g0_cal,

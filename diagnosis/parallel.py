@@ -20,6 +20,7 @@ diagnosis did.
 from __future__ import annotations
 
 import os
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 
@@ -64,6 +65,8 @@ class Runner:
     def __init__(self, state, *, workers: int | None = None, scheduler=None,
                  progress: bool = False):
         self.state, self.progress = state, progress
+        self.timings: list = []  # wall time of each map (reported)
+        t0 = time.perf_counter()
         self.workers = default_workers() if workers is None else int(workers)
         if self.workers < 1:
             raise ValueError(f"workers must be >= 1, got {workers!r}")
@@ -78,6 +81,8 @@ class Runner:
             self._pool = ProcessPoolExecutor(max_workers=self.workers,
                                              mp_context=get_context("spawn"),
                                              initializer=_init_worker, initargs=(state,))
+        self.timings.append({"phase": "start workers", "tasks": 0,
+                             "wall_s": round(time.perf_counter() - t0, 3)})
 
     @property
     def description(self) -> str:
@@ -88,6 +93,7 @@ class Runner:
     def map(self, fn, arg_tuples, *, desc: str = "") -> list:
         """``[fn(state, *args) for args in arg_tuples]``, run on the workers, in order."""
         arg_tuples = list(arg_tuples)
+        t0 = time.perf_counter()
         bar = tqdm(total=len(arg_tuples), desc=desc, disable=not self.progress, unit="task")
         results = [None] * len(arg_tuples)
         try:
@@ -110,6 +116,9 @@ class Runner:
                     bar.update()
         finally:
             bar.close()
+        self.timings.append({"phase": desc or getattr(fn, "__name__", "map"),
+                             "tasks": len(arg_tuples),
+                             "wall_s": round(time.perf_counter() - t0, 3)})
         return results
 
     def close(self) -> None:
