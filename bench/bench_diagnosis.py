@@ -178,6 +178,9 @@ def main(argv=None) -> int:
     p.add_argument("--timing-only", action="store_true",
                    help="only the 8-trial timing (writes bench/results/diagnosis_timing.json)")
     p.add_argument("--repeat", type=int, default=1, help="timing repetitions")
+    p.add_argument("--score-only", action="store_true",
+                   help="score the sets already diagnosed under --work (a run in progress "
+                        "or stopped), without running new ones")
     p.add_argument("--invariance", action="store_true",
                    help="only the nominal gap of 4 sets in every representation "
                         "(writes bench/results/diagnosis_invariance.json)")
@@ -225,10 +228,20 @@ def main(argv=None) -> int:
     # covers every effect, the nominal sets, the outside effects and the pairs
     specs = sorted(specs, key=lambda s: int(s.name.rsplit("-", 1)[1]))
     t0 = time.perf_counter()
-    result = run_validation(specs, work, progress=True, workers=args.workers,
-                            scheduler=args.scheduler)
+    if args.score_only:
+        from diagnosis.validation import score_markdown, summarise
+        rows = [json.loads(p.read_text()) for s in specs
+                for p in [work / "reports" / s.name / "score_row.json"] if p.is_file()]
+        summary = summarise(rows)
+        result = {"summary": summary, "rows": rows,
+                  "table_markdown": score_markdown(summary, rows)}
+        print(f"{len(rows)} of {len(specs)} sets diagnosed so far")
+    else:
+        result = run_validation(specs, work, progress=True, workers=args.workers,
+                                scheduler=args.scheduler)
     out = {"summary": result["summary"], "rows": result["rows"],
-           "settings": vars(args), "elapsed_s": time.perf_counter() - t0}
+           "settings": vars(args), "n_sets_drawn": len(specs),
+           "n_sets_done": len(result["rows"]), "elapsed_s": time.perf_counter() - t0}
     if args.timing:
         out["timing_8_trials"] = timing_run(work, args.repeat, args.workers)
     RESULTS.mkdir(parents=True, exist_ok=True)

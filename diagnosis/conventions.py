@@ -75,9 +75,26 @@ def _replace(trial, scale=None, offset=None, **arrays):
     return out
 
 
+def reader_applies_conventions() -> bool:
+    """True when the trial reader itself returns declared conventions converted (the
+    readers of log-format.md "Lab data": trialformat.finish_trial); they must then not be
+    applied twice."""
+    import trialformat.logs as logs
+    return hasattr(logs, "finish_trial")
+
+
 def apply_declared(trials) -> tuple[list, list]:
     """Apply the conventions the metadata declare; returns (trials, findings)."""
     out, findings = [], []
+    if reader_applies_conventions():
+        for t in trials:
+            if str(t.meta.get("angles", "")).lower() == "absolute":
+                findings.append(Finding("declared: angles absolute", t.name,
+                                        "posture subtracted by the reader"))
+            if (t.meta.get("sensors") or {}).get("torque_sign", 1) == -1:
+                findings.append(Finding("declared: torque_sign -1", t.name,
+                                        "tau_h negated by the reader"))
+        return list(trials), findings
     for t in trials:
         changes = {}
         if str(t.meta.get("angles", "")).lower() == "absolute":
