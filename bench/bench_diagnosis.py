@@ -1,14 +1,18 @@
 """Full validation of the sim-to-real gap diagnosis on sets whose effect is withheld.
 
 Makes validation sets with the project's simulator (each catalogue effect at realistic
-magnitudes, sets with nothing withheld, pairs, an effect outside the catalogue), diagnoses
-each blind, scores the verdicts against the truth files, and writes
-``bench/results/diagnosis.json`` and ``bench/results/diagnosis_score.md``. Resumable:
-sets already scored under ``--work`` are not run again. ``--timing`` also times the
-diagnosis of an 8-trial set (2 joints x 4 seeds, 50 s trials).
+magnitudes, sets with nothing withheld at every declared resolution level and tuning,
+pairs, effects outside the catalogue), each stored in a representation drawn at random
+(this project's CSV, 6/7/8/10 significant digits, fixed decimals, float32 CSV or .mat),
+diagnoses each blind, scores the verdicts against the truth files (every rate with its
+Wilson 95 % interval), and writes ``bench/results/diagnosis.json`` and
+``bench/results/diagnosis_score.md``. Resumable: sets already scored under ``--work``
+are not run again (run it under nohup; progress on stderr). ``--timing`` times the
+diagnosis of an 8-trial set (2 joints x 4 seeds, 50 s trials, all ten effects) with the
+default workers and with one process, side by side, and prints the speed-up.
 
-    python bench/bench_diagnosis.py                 # ~15-30 min on 2 cores
-    python bench/bench_diagnosis.py --per-effect 2 --nominal 6 --timing
+    python bench/bench_diagnosis.py                          # ~70 sets, about an hour on 2 cores
+    python bench/bench_diagnosis.py --timing-only --repeat 3 # 8-trial timing, 2 workers vs 1
 """
 
 from __future__ import annotations
@@ -28,23 +32,60 @@ from diagnosis.validation import SetSpec, draw_specs, make_set, nominal_gap, run
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def timing_run(work: Path) -> dict:
-    """Diagnose an 8-trial set (2 joints x 4 seeds x 50 s, gravity withheld)."""
+def timing_run(work: Path, repeat: int = 1, workers: int | None = None) -> dict:
+    """Diagnose an 8-trial set (2 joints x 4 seeds x 50 s, gravity withheld, all ten
+    effects tried) with ``workers`` processes (default: one per core) and with one,
+    alternating, ``repeat`` times each; medians and the paired speed-up."""
     from diagnosis import diagnose
-    cached = work / "timing_8trials.json"
-    if cached.is_file():
-        return json.loads(cached.read_text())
+    from diagnosis.parallel import default_workers
+    workers = workers or default_workers()
     spec = SetSpec("timing-8trials", (("gravity", {"tilt_deg": 5.0}),),
                    seeds=(101, 102, 103, 104), duration_s=50.0)
     folder = make_set(spec, work / "sets")
-    t0 = time.perf_counter()
-    report = diagnose(folder, work / "reports" / spec.name, progress=True)
-    result = {"n_trials": len(report.trials), "elapsed_s": time.perf_counter() - t0,
-              "verdict": report.verdict, "named": report.named, "fitted": report.fitted,
-              "n_simulations": report.n_simulations,
-              "load_average_1min_at_end": os.getloadavg()[0]}
-    cached.write_text(json.dumps(_clean(result), indent=2))
-    return result
+    runs = {workers: [], 1: []}
+    report = None
+    for i in range(repeat):
+        for w in (workers, 1):
+            t0 = time.perf_counter()
+            report = diagnose(folder, work / "reports" / f"{spec.name}-w{w}", progress=False,
+                              workers=w)
+            runs[w].append(time.perf_counter() - t0)
+            print(f"8-trial diagnosis, {w} process(es): {runs[w][-1]:.1f} s "
+                  f"(load {os.getloadavg()[0]:.2f})", flush=True)
+    ratios = [a / b for a, b in zip(runs[1], runs[workers])]
+    return {"n_trials": len(report.trials), "workers": workers,
+            "elapsed_s": float(np.median(runs[workers])), "elapsed_s_runs": runs[workers],
+            "one_process_s": float(np.median(runs[1])), "one_process_s_runs": runs[1],
+            "speed_up_median": float(np.median(ratios)), "speed_up_runs": ratios,
+            "verdict": report.verdict, "named": report.named, "fitted": report.fitted,
+            "n_simulations": report.n_simulations,
+            "load_average_1min_at_end": os.getloadavg()[0]}
+
+
+INVARIANCE_CASES = (
+    ("quantization", (("quantization", {"encoder_resolution_deg": 0.0031,
+                                        "torque_resolution_nm": 0.0123}),), 0),
+    ("nominal-r2", (), 2), ("nominal-r0", (), 0),
+    ("gravity", (("gravity", {"tilt_deg": 4.0}),), 1))
+
+
+def invariance_run(work: Path) -> dict:
+    """The nominal gap of one 2 x 12 s set per case written in every representation
+    (representation.REPRESENTATIONS), with its part per feature kind."""
+    from diagnosis.representation import REPRESENTATIONS
+    out = {}
+    for name, effects, resolution in INVARIANCE_CASES:
+        rows = {}
+        for rep in REPRESENTATIONS:
+            spec = SetSpec(f"inv-{name}-{rep}", effects, seeds=(77,), duration_s=12.0,
+                           resolution_level=resolution, representation=rep)
+            g = nominal_gap(make_set(spec, work / "sets"))
+            kinds = {k[0]: v for k, v in g.breakdown("kind").items()}
+            rows[rep] = {"gap": g.value, "excess": g.excess, "by_kind": kinds}
+            print(f"{name:>14} {rep:>12}: gap {g.value:9.3f}  " + "  ".join(
+                f"{k} {v:8.2f}" for k, v in kinds.items()), flush=True)
+        out[name] = rows
+    return out
 
 
 #: effects not detected at the low end of their realistic range: also tried stronger
@@ -126,10 +167,23 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--work", default="runs/diagnosis_validation",
                    help="folder for the sets and reports (resumable)")
-    p.add_argument("--per-effect", type=int, default=2)
-    p.add_argument("--nominal", type=int, default=4)
-    p.add_argument("--pairs", type=int, default=3)
-    p.add_argument("--outside", type=int, default=1)
+    p.add_argument("--per-effect", type=int, default=5)
+    p.add_argument("--nominal", type=int, default=8,
+                   help="nothing-withheld sets (resolution levels 0-3 x both tunings)")
+    p.add_argument("--pairs", type=int, default=4)
+    p.add_argument("--outside", type=int, default=5, help="outside-catalogue sets")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local processes per diagnosis (default: one per core)")
+    p.add_argument("--scheduler", default=None, help="Dask scheduler address")
+    p.add_argument("--timing-only", action="store_true",
+                   help="only the 8-trial timing (writes bench/results/diagnosis_timing.json)")
+    p.add_argument("--repeat", type=int, default=1, help="timing repetitions")
+    p.add_argument("--score-only", action="store_true",
+                   help="score the sets already diagnosed under --work (a run in progress "
+                        "or stopped), without running new ones")
+    p.add_argument("--invariance", action="store_true",
+                   help="only the nominal gap of 4 sets in every representation "
+                        "(writes bench/results/diagnosis_invariance.json)")
     p.add_argument("--duration", type=float, default=12.0, help="trial length [s]")
     p.add_argument("--seed", type=int, default=2024)
     p.add_argument("--timing", action="store_true", help="also time an 8-trial diagnosis")
@@ -141,6 +195,20 @@ def main(argv=None) -> int:
                    help="with --calibrate: nominal-vs-nominal gaps only")
     args = p.parse_args(argv)
     work = Path(args.work)
+    if args.invariance:
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        inv = invariance_run(work)
+        (RESULTS / "diagnosis_invariance.json").write_text(json.dumps(_clean(inv), indent=2))
+        return 0
+    if args.timing_only:
+        tm = timing_run(work, args.repeat, args.workers)
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        (RESULTS / "diagnosis_timing.json").write_text(json.dumps(_clean(tm), indent=2))
+        print(f"| 8-trial set (8 x 50 s, all ten effects) | {tm['workers']} processes | 1 process "
+              f"| speed-up |\n|---|---|---|---|\n| median of {args.repeat} | "
+              f"{tm['elapsed_s']:.1f} s | {tm['one_process_s']:.1f} s | "
+              f"{tm['speed_up_median']:.2f} |")
+        return 0
     if args.calibrate:
         cal = calibration_run(work, args.duration, args.calibration_seeds,
                               floors_wanted=not args.no_floors)
@@ -154,21 +222,36 @@ def main(argv=None) -> int:
     specs = draw_specs(np.random.default_rng(args.seed), n_per_effect=args.per_effect,
                        n_nominal=args.nominal, n_pairs=args.pairs, n_outside=args.outside,
                        pairs=(("gravity", "sensor_noise"), ("friction", "torque_sensor_lag"),
-                              ("actuator_lag", "gravity")),
+                              ("actuator_lag", "gravity"), ("delay", "inertia_mismatch")),
                        duration_s=args.duration)
+    # round robin (the i-th set of every group, then the next): a run stopped early still
+    # covers every effect, the nominal sets, the outside effects and the pairs
+    specs = sorted(specs, key=lambda s: int(s.name.rsplit("-", 1)[1]))
     t0 = time.perf_counter()
-    result = run_validation(specs, work, progress=True)
+    if args.score_only:
+        from diagnosis.validation import score_markdown, summarise
+        rows = [json.loads(p.read_text()) for s in specs
+                for p in [work / "reports" / s.name / "score_row.json"] if p.is_file()]
+        summary = summarise(rows)
+        result = {"summary": summary, "rows": rows,
+                  "table_markdown": score_markdown(summary, rows)}
+        print(f"{len(rows)} of {len(specs)} sets diagnosed so far")
+    else:
+        result = run_validation(specs, work, progress=True, workers=args.workers,
+                                scheduler=args.scheduler)
     out = {"summary": result["summary"], "rows": result["rows"],
-           "settings": vars(args), "elapsed_s": time.perf_counter() - t0}
+           "settings": vars(args), "n_sets_drawn": len(specs),
+           "n_sets_done": len(result["rows"]), "elapsed_s": time.perf_counter() - t0}
     if args.timing:
-        out["timing_8_trials"] = timing_run(work)
+        out["timing_8_trials"] = timing_run(work, args.repeat, args.workers)
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "diagnosis.json").write_text(json.dumps(_clean(out), indent=2))
     table = result["table_markdown"]
     if args.timing:
         tm = out["timing_8_trials"]
-        table += (f"\n8-trial set (50 s trials): {tm['elapsed_s']:.0f} s, verdict "
-                  f"{tm['verdict']} {tm['named']}\n")
+        table += (f"\n8-trial set (50 s trials): {tm['elapsed_s']:.0f} s with {tm['workers']} "
+                  f"processes, {tm['one_process_s']:.0f} s with one (speed-up "
+                  f"{tm['speed_up_median']:.2f}); verdict {tm['verdict']} {tm['named']}\n")
     (RESULTS / "diagnosis_score.md").write_text(table)
     print(table)
     return 0

@@ -22,6 +22,13 @@ def register(subparsers) -> None:
                    help=f"comma-separated effects to try (default: all of "
                         f"{','.join(cat.CATALOGUE)})")
     p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local processes for the simulations (default: one per core)")
+    p.add_argument("--scheduler", default=None,
+                   help="Dask distributed scheduler address (e.g. tcp://127.0.0.1:8786)")
+    p.add_argument("--rk4-step", type=float, default=None,
+                   help="the plant's internal RK4 step [s]; must divide the sample period "
+                        "(default: the plant's, or the nearest step that divides it)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_diagnose)
 
@@ -35,6 +42,9 @@ def register(subparsers) -> None:
                    help="sets with an effect outside the catalogue")
     v.add_argument("--duration", type=float, default=12.0, help="trial length [s]")
     v.add_argument("--seed", type=int, default=2024, help="seed of the draws")
+    v.add_argument("--workers", type=int, default=None,
+                   help="local processes per diagnosis (default: one per core)")
+    v.add_argument("--scheduler", default=None, help="Dask distributed scheduler address")
     v.add_argument("--quiet", action="store_true", help="no progress bars")
     v.set_defaults(func=_validate)
 
@@ -52,9 +62,11 @@ def _diagnose(args) -> int:
     from .core import DiagnosisConfig, diagnose
     config = DiagnosisConfig(effects=_effects(args.effects))
     report = diagnose(args.folder, args.out, config=config, plant=args.fmu,
-                      progress=not args.quiet)
+                      progress=not args.quiet, workers=args.workers,
+                      scheduler=args.scheduler, rk4_step=args.rk4_step)
     named = " + ".join(report.named)
     print(f"verdict: {report.verdict}{': ' + named if named else ''}")
+    print(report.summary)
     print(f"nominal gap {report.gap['nominal_all']:.3g} (threshold "
           f"{report.gap['significance_threshold']:.3g}); report: {Path(args.out) / 'report.md'}")
     return 0
@@ -67,7 +79,8 @@ def _validate(args) -> int:
     specs = draw_specs(np.random.default_rng(args.seed), n_per_effect=args.per_effect,
                        n_nominal=args.nominal, n_pairs=args.pairs, n_outside=args.outside,
                        duration_s=args.duration)
-    result = run_validation(specs, args.out, progress=not args.quiet)
+    result = run_validation(specs, args.out, progress=not args.quiet,
+                            workers=args.workers, scheduler=args.scheduler)
     print(result["table_markdown"])
     print(f"score table: {Path(args.out) / 'score.md'}")
     return 0

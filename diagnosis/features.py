@@ -16,15 +16,22 @@ The same function computes them on a measured and on a simulated trial. Four kin
     friction compensation) for the perturbed joint. Also computed per time batch.
 ``grid``
     The sample grid: log10 of the quantisation step seen in theta [rad] and tau_h [N m]
-    (0 when the samples lie on no grid, then a small floor).
+    (storage.find_grid, tolerant of the storage rounding; when the samples lie on no
+    resolvable grid, the smallest step the storage could reveal, or a small floor).
+
+With a :class:`StorageContext` (storage.py: how the measured numbers were stored), every
+feature also gets ``var_storage``, the variance the storage rounding adds to it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import signal as sps
+
+from .storage import Grid, Storage, detect_storage, find_grid, resolvable_step
 
 SIGNALS = ("theta", "tau_h", "tau_m")
 
@@ -97,16 +104,106 @@ class FeatureVector:
         from time batches instead, inf where the feature is not reliable.
     batches : ndarray, shape (n_batches, F)
         Per-batch values of the ``static`` features (NaN for the others).
+    var_storage : ndarray, shape (F,)
+        Variance the storage rounding of the numbers adds (0 without a StorageContext).
     """
 
     labels: list
     values: np.ndarray
     var_stat: np.ndarray
     batches: np.ndarray
+    var_storage: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.var_storage is None:
+            self.var_storage = np.zeros_like(self.values)
+
+
+#: columns whose storage is read and re-applied
+STORED_SIGNALS = ("tau_delta",) + SIGNALS
+#: the rounding-noise model (step^2 / 12, white) is taken as known to within this fraction
+ROUNDING_MODEL_TOLERANCE = 0.5
+
+
+@dataclass(frozen=True)
+class StorageContext:
+    """How one measured trial's numbers were stored, read once from the whole trial.
+
+    Attributes
+    ----------
+    storage : dict signal -> tuple of Storage
+        Per column (joint j at index j-1) of ``STORED_SIGNALS``.
+    rounding_var : dict signal -> ndarray (n,)
+        Mean rounding variance step^2 / 12 of each column [unit^2].
+    resolvable : dict signal -> ndarray (n,)
+        Smallest quantisation step the storage can reveal per column (grid feature).
+    transforms : dict signal -> (scale, offset)
+        The trial was corrected after reading (conventions.py): value = raw * scale -
+        offset; the storage applies to the raw numbers.
+    """
+
+    storage: dict
+    rounding_var: dict
+    resolvable: dict
+    transforms: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_trial(cls, trial) -> "StorageContext":
+        storage, var, res = {}, {}, {}
+        for s in STORED_SIGNALS:
+            x = np.asarray(trial.signal(s), dtype=float)
+            cols = [detect_storage(x[:, j]) for j in range(x.shape[1])]
+            storage[s] = tuple(cols)
+            var[s] = np.array([c.rounding_variance(x[:, j]) for j, c in enumerate(cols)])
+            res[s] = np.array([resolvable_step(x[:, j], c) for j, c in enumerate(cols)])
+        return cls(storage, var, res)
+
+    def store(self, trial):
+        """A copy of ``trial`` (a simulation) with every column stored as the measured
+        trial's was: measured and simulated numbers then went through the same writer."""
+        if all(c.kind in ("float64", "constant") for cols in self.storage.values()
+               for c in cols):
+            return trial
+        changes = {}
+        for s in SIGNALS:
+            x = np.asarray(trial.signal(s), dtype=float)
+            scale, offset = self.transforms.get(s, (1.0, 0.0))
+            raw = (x + offset) / scale
+            stored = np.column_stack([c.apply(raw[:, j])
+                                      for j, c in enumerate(self.storage[s])])
+            changes[s] = stored * scale - offset
+        return dataclasses.replace(trial, **changes)
+
+    def grid(self, s: str, j: int, x) -> "Grid":
+        """The quantisation grid of column s[j] (0-based j) of samples ``x`` (measured, or
+        a simulation stored alike), read on the raw numbers (storage.find_grid)."""
+        scale, offset = self.transforms.get(s, (1.0, 0.0))
+        off = float(np.asarray(offset, dtype=float)[j]) if np.ndim(offset) else float(offset)
+        raw = (np.asarray(x, dtype=float) + off) / scale
+        g = find_grid(raw, self.storage[s][j], resolvable=self.resolvable[s][j] / abs(scale))
+        return Grid(g.step * abs(scale), g.sigma * abs(scale), g.resolvable * abs(scale))
+
+    def converted(self, scale: dict, offset: dict) -> "StorageContext":
+        """The context of the trial corrected as value = raw * scale - offset."""
+        if not scale and not offset:
+            return self
+        var, res, tr = dict(self.rounding_var), dict(self.resolvable), dict(self.transforms)
+        for s in set(scale) | set(offset):
+            a, b = float(scale.get(s, 1.0)), np.asarray(offset.get(s, 0.0), dtype=float)
+            a0, b0 = tr.get(s, (1.0, 0.0))
+            tr[s] = (a0 * a, b0 * a + b)
+            var[s] = var[s] * a * a
+            res[s] = res[s] * abs(a)
+        return StorageContext(self.storage, var, res, tr)
+
+    def describe(self) -> dict:
+        """signal -> list of the storage of each joint's column (for the report)."""
+        return {s: [c.describe() for c in cols] for s, cols in self.storage.items()}
 
 
 def trial_features(trial, config: FeatureConfig = FeatureConfig(), *, start: int = 0,
-                   stop: int | None = None) -> FeatureVector:
+                   stop: int | None = None,
+                   context: StorageContext | None = None) -> FeatureVector:
     """Features of ``trial`` over the samples ``start:stop``.
 
     Parameters
@@ -115,79 +212,151 @@ def trial_features(trial, config: FeatureConfig = FeatureConfig(), *, start: int
     config : FeatureConfig
     start, stop : int
         Sample range (python slice convention).
+    context : StorageContext, optional
+        The *measured* trial's storage: adds the rounding variance of every feature and
+        fixes the smallest resolvable grid (pass the same context for a simulation of
+        it, after ``context.store(sim)``). Default: exact numbers.
     """
     sl = slice(start, stop)
     fs = trial.fs
     data = {s: np.asarray(trial.signal(s))[sl] for s in ("tau_delta",) + SIGNALS}
     n = data["theta"].shape[1]
     inputs = [trial.perturbed_dof] if trial.perturbed_dof is not None else list(range(1, n + 1))
-    rows = []  # (label, value, var_stat, batch values)
+    rows = []  # (label, value, var_stat, batch values, storage variance)
+    spectra = _Spectra(data, fs, config)
     for k in inputs:
         tag = f"_in{k}" if len(inputs) > 1 else ""
-        rows += _spectral_rows(data, k, n, fs, config, tag)
-    rows += _static_rows(data, inputs, n, fs, config)
-    rows += _grid_rows(data, n, config)
+        rows += _spectral_rows(data, k, n, fs, config, tag, context, spectra)
+    rows += _static_rows(data, inputs, n, fs, config, context)
+    rows += _grid_rows(data, n, config, context)
     n_b = config.n_batches
     batches = np.array([r[3] if r[3] is not None else np.full(n_b, np.nan) for r in rows]).T
     return FeatureVector(labels=[r[0] for r in rows],
                          values=np.array([r[1] for r in rows], dtype=float),
                          var_stat=np.array([r[2] for r in rows], dtype=float),
-                         batches=batches)
+                         batches=batches,
+                         var_storage=np.array([r[4] for r in rows], dtype=float))
+
+
+def _rounding_psd(context, s, j, fs) -> float:
+    """One-sided PSD of the storage rounding noise of column s[j] [unit^2/Hz]."""
+    if context is None:
+        return 0.0
+    return 2.0 * float(context.rounding_var[s][j - 1]) / fs
 
 
 def _band_label(band) -> str:
     return f"{band[0]:g}-{band[1]:g} Hz"
 
 
-def _spectral_rows(data, k, n, fs, cfg, tag):
+class _Spectra:
+    """Welch (Hann, mean removed per segment, one-sided density) auto- and cross-spectra
+    of a trial's columns from one FFT per column: the same numbers as scipy.signal.welch
+    and csd (tested), which recompute the FFT of x for every pair."""
+
+    def __init__(self, data, fs, cfg):
+        self.fs, self.cfg = fs, cfg
+        self.window = sps.get_window("hann", cfg.nperseg)
+        self.scale = 1.0 / (fs * np.sum(self.window ** 2))
+        self.f = np.fft.rfftfreq(cfg.nperseg, 1.0 / fs)
+        self._data, self._fft = data, {}
+
+    def fft(self, signal, j):
+        key = (signal, j)
+        if key not in self._fft:
+            x = self._data[signal][:, j - 1]
+            step = self.cfg.nperseg - self.cfg.noverlap
+            seg = np.lib.stride_tricks.sliding_window_view(x, self.cfg.nperseg)[::step]
+            seg = seg - seg.mean(axis=1, keepdims=True)
+            self._fft[key] = np.fft.rfft(seg * self.window, axis=1)
+        return self._fft[key]
+
+    def cross(self, a, b):
+        """One-sided cross-spectral density of columns a = (signal, j) and b, conj(Fa) Fb."""
+        p = np.mean(np.conj(self.fft(*a)) * self.fft(*b), axis=0) * self.scale
+        p[1:] *= 2.0
+        if self.cfg.nperseg % 2 == 0:
+            p[-1] /= 2.0
+        return p
+
+    def auto(self, a):
+        return self.cross(a, a).real
+
+
+def _spectral_rows(data, k, n, fs, cfg, tag, context=None, spectra=None):
+    spectra = spectra or _Spectra(data, fs, cfg)
     x = data["tau_delta"][:, k - 1]
-    kw = dict(fs=fs, window="hann", nperseg=cfg.nperseg, noverlap=cfg.noverlap)
-    f, pxx = sps.welch(x, **kw)
+    sx = _rounding_psd(context, "tau_delta", k, fs)
+    f, pxx = spectra.f, spectra.auto(("tau_delta", k))
     n_seg = 1 + (x.shape[0] - cfg.nperseg) // (cfg.nperseg - cfg.noverlap)
     rows = []
     for s in SIGNALS:
         for i in range(1, n + 1):
-            y = data[s][:, i - 1]
-            _, pxy = sps.csd(x, y, **kw)
-            _, pyy = sps.welch(y, **kw)
-            pyy = np.maximum(pyy, np.finfo(float).tiny)
+            pxy = spectra.cross(("tau_delta", k), (s, i))
+            pyy = np.maximum(spectra.auto((s, i)), np.finfo(float).tiny)
             h = pxy / pxx
             coh = np.clip(np.abs(pxy) ** 2 / (pxx * pyy), 1e-6, 1.0)
             var_bin = (1.0 - coh) / (2.0 * n_seg * coh)
+            # storage rounding: white noise of PSD sy on y (and sx on x) lowers the
+            # coherence by sy / (|H|^2 Pxx): ln|H| variance (1 - coh) / (2 n coh), same form
+            sy = _rounding_psd(context, s, i, fs)
+            gain = np.maximum(np.abs(pxy) ** 2 / pxx, np.finfo(float).tiny)
+            var_q = (sy / gain + sx / pxx) / (2.0 * n_seg)
             for band in cfg.coherent_bands:
                 sel = (f >= band[0]) & (f <= band[1])
                 m_eff = max(1.0, sel.sum() / 1.5)  # Hann: neighbouring bins correlate
                 var = float(np.mean(var_bin[sel]) / m_eff)
+                vq = float(np.mean(var_q[sel]) / m_eff)
                 if np.mean(coh[sel]) < cfg.min_coherence:
                     var = np.inf  # Welch's variance formula fails here: feature unused
                 hb = h[sel]
                 logmag = float(np.mean(np.log(np.abs(hb) + 1e-300)))
                 phase = float(np.angle(np.mean(hb / (np.abs(hb) + 1e-300))))
                 lab = _band_label(band)
-                rows.append((("frf", s, i, lab, f"logmag{tag}"), logmag, var, None))
-                rows.append((("frf", s, i, lab, f"phase{tag}"), phase, var, None))
+                rows.append((("frf", s, i, lab, f"logmag{tag}"), logmag, var, None, vq))
+                rows.append((("frf", s, i, lab, f"phase{tag}"), phase, var, None, vq))
             p_inc = pyy * (1.0 - coh)
             for band in cfg.noise_bands:
                 sel = (f >= band[0]) & (f <= band[1])
                 m_eff = max(1.0, sel.sum() / 1.5)
-                value = float(np.log(np.mean(p_inc[sel]) + cfg.noise_psd_floor[s]))
+                level = np.mean(p_inc[sel]) + cfg.noise_psd_floor[s]
+                value = float(np.log(level))
+                # the rounding noise sy is in both the measurement and the stored model;
+                # its model (step^2/12, white) is uncertain by ROUNDING_MODEL_TOLERANCE
+                vq = float((ROUNDING_MODEL_TOLERANCE * sy / level) ** 2)
                 rows.append((("noise", s, i, _band_label(band), f"lnpsd{tag}"), value,
-                             1.0 / (n_seg * m_eff), None))
+                             1.0 / (n_seg * m_eff), None, vq))
     return rows
 
 
-def _static_coefficients(theta, tau_m, fs, cfg):
-    """(a0, a_c) of the regression of tau_m on [1, theta, omega, alpha, tanh(omega/w0)]."""
+def _static_design(theta, fs, cfg):
     sos = sps.butter(2, cfg.velocity_cutoff_hz, fs=fs, output="sos")
     th = sps.sosfiltfilt(sos, theta)
     omega = np.gradient(th) * fs
     alpha = np.gradient(omega) * fs
-    design = np.column_stack([np.ones_like(th), th, omega, alpha, np.tanh(omega / cfg.omega0)])
-    coef, *_ = np.linalg.lstsq(design, tau_m, rcond=None)
+    return np.column_stack([np.ones_like(th), th, omega, alpha, np.tanh(omega / cfg.omega0)])
+
+
+def _static_coefficients(theta, tau_m, fs, cfg):
+    """(a0, a_c) of the regression of tau_m on [1, theta, omega, alpha, tanh(omega/w0)]."""
+    coef, *_ = np.linalg.lstsq(_static_design(theta, fs, cfg), tau_m, rcond=None)
     return coef[0], coef[4]
 
 
-def _static_rows(data, inputs, n, fs, cfg):
+def _static_rounding_var(theta, fs, cfg, var_tau) -> tuple[float, float]:
+    """Variance of (a0, a_c) from white rounding noise of variance var_tau on tau_m:
+    var_tau (X^T X)^-1 (least squares)."""
+    if not var_tau:
+        return 0.0, 0.0
+    design = _static_design(theta, fs, cfg)
+    try:
+        cov = np.linalg.pinv(design.T @ design) * var_tau
+    except np.linalg.LinAlgError:
+        return np.inf, np.inf
+    return float(cov[0, 0]), float(cov[4, 4])
+
+
+def _static_rows(data, inputs, n, fs, cfg, context=None):
     n_samples = data["theta"].shape[0]
     edges = np.linspace(0, n_samples, cfg.n_batches + 1).astype(int)
     rows = []
@@ -196,37 +365,36 @@ def _static_rows(data, inputs, n, fs, cfg):
         a0, ac = _static_coefficients(th, tm, fs, cfg)
         per_batch = np.array([_static_coefficients(th[a:b], tm[a:b], fs, cfg)
                               for a, b in zip(edges[:-1], edges[1:])])
-        rows.append((("static", "tau_m", j, "0 Hz", "a0"), a0, np.nan, per_batch[:, 0]))
+        var_tau = 0.0 if context is None else float(context.rounding_var["tau_m"][j - 1])
+        v0, vc = _static_rounding_var(th, fs, cfg, var_tau)
+        rows.append((("static", "tau_m", j, "0 Hz", "a0"), a0, np.nan, per_batch[:, 0], v0))
         if j in inputs:
-            rows.append((("static", "tau_m", j, "0 Hz", "a_c"), ac, np.nan, per_batch[:, 1]))
+            rows.append((("static", "tau_m", j, "0 Hz", "a_c"), ac, np.nan, per_batch[:, 1],
+                         vc))
     return rows
 
 
-def grid_step(x: np.ndarray, *, rtol: float = 1e-6) -> float:
-    """Quantisation step of the samples ``x`` (0 when they lie on no grid).
-
-    The step is the smallest positive difference between distinct values; the samples
-    are on that grid when every difference between distinct values is an integer
-    multiple of it (within ``rtol``). Exact for r * round(x / r) data.
-    """
-    u = np.unique(np.asarray(x, dtype=float))
-    if u.size < 3:
-        return 0.0
-    du = np.diff(u)
-    step = du.min()
-    if step <= 0:
-        return 0.0
-    ratio = du / step
-    if ratio.max() > 1e7 or np.max(np.abs(ratio - np.round(ratio))) > rtol:
-        return 0.0
-    return float(step)
+def grid_step(x: np.ndarray, storage: Storage | None = None) -> float:
+    """Quantisation step of the samples ``x`` (0 when they lie on no resolvable grid);
+    ``storage`` (default: detected) is how the numbers were stored (storage.find_grid)."""
+    return find_grid(x, storage).step
 
 
-def _grid_rows(data, n, cfg):
+def _grid_rows(data, n, cfg, context=None):
     rows = []
     for s in ("theta", "tau_h"):
         for j in range(1, n + 1):
-            step = grid_step(data[s][:, j - 1])
-            rows.append((("grid", s, j, "-", "log10step"),
-                         float(np.log10(max(step, cfg.grid_floor[s]))), 0.0, None))
+            x = data[s][:, j - 1]
+            if context is None:
+                grid = find_grid(x)
+            else:
+                grid = context.grid(s, j - 1, x)
+            # no grid: the smallest step the storage could have revealed (a bound)
+            step = grid.step if grid.step > 0 else grid.resolvable
+            step = max(step, cfg.grid_floor[s])
+            var = 0.0
+            if grid.step > 0:  # uncertainty of the step, in decades
+                var = (grid.sigma / (grid.step * np.log(10.0))) ** 2
+            rows.append((("grid", s, j, "-", "log10step"), float(np.log10(step)), 0.0,
+                         None, var))
     return rows

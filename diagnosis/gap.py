@@ -51,6 +51,7 @@ def make_normaliser(measured: FeatureVector, nominal: FeatureVector,
     if batch.any():
         diff = measured.batches[:, batch] - nominal.batches[:, batch]
         var[batch] = np.var(diff, axis=0, ddof=1) / diff.shape[0]
+    var = var + measured.var_storage  # the rounding of the stored numbers (storage.py)
     floor = np.array([_floor(lab, v, config) for lab, v in zip(measured.labels,
                                                                 measured.values)])
     sigma2 = var + floor ** 2
@@ -106,12 +107,15 @@ class GapResult:
     expected : ndarray
     labels : list of tuple
         ``(trial, level, kind, signal, joint, band, part)`` per feature.
+    sigma : ndarray
+        The normalising uncertainty of every feature (z * sigma is the difference).
     """
 
     value: float
     z: np.ndarray
     expected: np.ndarray
     labels: list
+    sigma: np.ndarray | None = None
 
     @property
     def excess(self) -> float:
@@ -148,11 +152,13 @@ def set_gap(pairs) -> GapResult:
     pairs : iterable of (name, level, measured FeatureVector, simulated FeatureVector,
         Normaliser)
     """
-    zs, es, labels = [], [], []
+    zs, es, ss, labels = [], [], [], []
     for name, level, meas, sim, norm in pairs:
         zs.append(z_scores(meas, sim, norm))
         es.append(norm.expected)
+        ss.append(norm.sigma)
         labels += [(name, level) + tuple(lab) for lab in meas.labels]
     z = np.concatenate(zs) if zs else np.zeros(0)
     e = np.concatenate(es) if es else np.zeros(0)
-    return GapResult(value=gap_value(z, e), z=z, expected=e, labels=labels)
+    sigma = np.concatenate(ss) if ss else np.zeros(0)
+    return GapResult(value=gap_value(z, e), z=z, expected=e, labels=labels, sigma=sigma)

@@ -1,7 +1,7 @@
 """Reading the measured trials of a diagnosis, blind to any truth.
 
-Only ``NAME.csv`` with its ``NAME.json`` are read; files whose stem ends in ``.truth``
-are never opened, and the ``simulation`` key a simulator may leave in the metadata is
+Only ``NAME.csv`` with its ``NAME.json`` (or ``NAME.mat``, estimation.matlab) are read;
+files whose stem ends in ``.truth`` are never opened, and the ``simulation`` key a simulator may leave in the metadata is
 dropped on reading, so no code after this point can see what was really simulated.
 """
 
@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+
+import numpy as np
 
 import trialformat as tf
 
@@ -21,17 +23,24 @@ HIDDEN_KEYS = ("simulation",)
 
 
 def trial_paths(source) -> list[Path]:
-    """The ``NAME.csv`` paths of a folder (or a list of paths), truth files excluded."""
+    """The ``NAME.csv`` / ``NAME.mat`` paths of a folder (or a list of paths), truth
+    files excluded."""
     if isinstance(source, (str, os.PathLike)):
         folder = Path(source)
         if not folder.is_dir():
             raise DiagnosisInputError(f"{folder}: not a folder of trials")
-        paths = sorted(folder.glob("*.csv"))
+        paths = sorted(folder.glob("*.csv")) + sorted(folder.glob("*.mat"))
+        both = sorted({p.stem for p in paths if p.suffix == ".csv"}
+                      & {p.stem for p in paths if p.suffix == ".mat"})
+        if both:
+            raise DiagnosisInputError(f"{folder}: trial(s) {both} present both as .csv and "
+                                      f".mat; keep one")
     else:
         paths = [Path(p) for p in source]
     paths = [p for p in paths if not p.stem.endswith(".truth")]
     if not paths:
-        raise DiagnosisInputError(f"{source}: no trial (no NAME.csv with its NAME.json)")
+        raise DiagnosisInputError(f"{source}: no trial (no NAME.csv with its NAME.json, "
+                                  f"no NAME.mat)")
     return paths
 
 
@@ -44,14 +53,19 @@ def load_trials(source, *, min_samples: int = tf.MIN_SAMPLES) -> list[tf.Trial]:
         No trial, a trial the format refuses (too short, ...), or declared set-ups that
         disagree (the message names both files and the key).
     """
+    from estimation.io import read_trial
     trials = []
     for path in trial_paths(source):
         try:
-            trial = tf.read_trial(path, min_samples=min_samples)
-        except tf.TrialFormatError as exc:
+            trial = read_trial(path, min_samples=min_samples)
+        except (tf.TrialFormatError, ValueError) as exc:
             raise DiagnosisInputError(str(exc)) from None
         for key in HIDDEN_KEYS:
             trial.meta.pop(key, None)
+        # float32 storage (a .mat) is a representation, not a working precision
+        for s in tf.SIGNALS:
+            setattr(trial, s, np.asarray(trial.signal(s), dtype=float))
+        trial.t = np.asarray(trial.t, dtype=float)
         trials.append(trial)
     check_consistent(trials)
     return trials

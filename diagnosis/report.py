@@ -75,7 +75,8 @@ def markdown(report) -> str:
     lines = [f"# Sim-to-real gap diagnosis", "",
              f"Trials: {', '.join(report.trials)}", "",
              f"## Verdict: **{report.verdict}**"
-             + (f" — {' + '.join(report.named)}" if report.named else ""), ""]
+             + (f" — {' + '.join(report.named)}" if report.named else ""), "",
+             report.summary, ""]
     if report.named:
         lines += [f"Fitted: {_params(report.fitted)}", "",
                   f"Held-out gap {_fmt(g['nominal_held_out'])} -> {_fmt(g['named_held_out'])} "
@@ -84,7 +85,14 @@ def markdown(report) -> str:
     lines += [f"Nominal gap, all data: {_fmt(g['nominal_all'])} (significant above "
               f"{_fmt(g['significance_threshold'])}); calibration {_fmt(g['nominal_calibration'])}, "
               f"held out {_fmt(g['nominal_held_out'])}.", "",
-              "## Where (nominal model)", "",
+              "## Where (nominal model)", ""]
+    if report.conventions:
+        lines += ["Conventions and set-up mismatches (found in the files, corrected before "
+                  "the diagnosis):", ""] + [f"- {c}" for c in report.where["conventions"]] + [""]
+    lines += ["Storage of the numbers: " + "; ".join(
+                  f"{name}: " + ", ".join(f"{s} {'/'.join(v)}" for s, v in cols.items())
+                  for name, cols in list(report.where["storage"].items())[:2])
+              + (" ..." if len(report.where["storage"]) > 2 else ""), "",
               f"![where]({FIGURES['where']})", ""]
     w = report.where["nominal"]
     lines += [f"Coherent (FRF) share of the squared normalised differences: "

@@ -22,29 +22,74 @@ def nominal_setup(meta: dict, arm):
     return Setup.from_metadata(meta).with_arm(arm.M, arm.B, arm.K)
 
 
-def simulate_like(trial, setup, effects: dict | None, n_samples: int, *, plant=None):
+#: a run whose plant state became non-finite is retried once with the plant's RK4 step
+#: divided by this (LuGre sigma0 = 1e6 N m/rad needs 5e-7 s where the reference is 1e-5 s)
+NUMERICAL_RETRY_FACTOR = 20
+
+
+def simulate_like(trial, setup, effects: dict | None, n_samples: int, *, plant=None,
+                  rk4_step: float | None = None):
     """Simulate the first ``n_samples`` of ``trial``'s experiment with ``effects`` added.
+
+    The plant's RK4 step divides the control period at any rate (``rk4_step`` or the
+    orchestrator's choice near the plant's default). A run whose plant failed (an FMI
+    error: a non-finite state) is retried once with the step divided by
+    NUMERICAL_RETRY_FACTOR: if that run succeeds, the failure was numerical (a stiff
+    model such as a large LuGre sigma0 at 1e-5 s), not the model; the run returned then
+    records ``meta["simulation"]["numerical_retry"]``. A loop that leaves its torque or
+    angle limits is a model that cannot reproduce the experiment (None), not retried.
 
     Returns
     -------
     trialformat.Trial or None
-        None when the closed loop diverges or the simulation fails for this model (a
-        candidate that cannot reproduce the experiment).
+        None when the model cannot reproduce the experiment even with the smaller step.
     """
     from orchestrator import simulate_trial
+    from orchestrator.trial import get_plant, rk4_step_for
     seed = int((trial.meta.get("perturbation") or {}).get("seed", 0) or 0) + SEED_OFFSET
+
+    def run(step):
+        return simulate_trial(setup, perturbed_dof=trial.perturbed_dof,
+                              perturbation=np.asarray(trial.tau_delta[:n_samples]),
+                              seed=seed, effects=effects or None, plant=plant,
+                              name=f"{trial.name}-sim",
+                              parameters=None if step is None else {"rk4_step": step})
     try:
-        sim = simulate_trial(setup, perturbed_dof=trial.perturbed_dof,
-                             perturbation=np.asarray(trial.tau_delta[:n_samples]),
-                             seed=seed, effects=effects or None, plant=plant,
-                             name=f"{trial.name}-sim")
+        sim = run(rk4_step)
+        if _finite(sim):
+            return sim
+        failure = "non-finite signals"
     except (RuntimeError, FloatingPointError, OverflowError) as exc:
-        # a diverging loop, or a plant that refuses this model (e.g. an interface
-        # compliance with an estimated arm whose M_h is not positive definite)
-        if type(exc).__name__ in ("DivergenceError", "FMUCallError") or isinstance(
-                exc, (FloatingPointError, OverflowError)):
-            return None
-        raise DiagnosisSimulationError(f"simulating {trial.name}: {exc}") from exc
-    if not all(np.isfinite(sim.signal(s)).all() for s in ("theta", "tau_h", "tau_m")):
+        if not _model_failure(exc):
+            raise DiagnosisSimulationError(f"simulating {trial.name}: {exc}") from exc
+        if type(exc).__name__ != "FMUCallError":
+            return None  # the loop left its limits: the model, not the numerics
+        failure = f"{type(exc).__name__}: {exc}"
+    default = (get_plant(plant) if not hasattr(plant, "parameters") else plant
+               ).parameters.get("rk4_step")
+    if default is None:
         return None
+    first = rk4_step if rk4_step is not None else rk4_step_for(1.0 / trial.fs, float(default))
+    smaller = first / NUMERICAL_RETRY_FACTOR
+    try:
+        sim = run(smaller)
+    except (RuntimeError, FloatingPointError, OverflowError) as exc:
+        if not _model_failure(exc):
+            raise DiagnosisSimulationError(f"simulating {trial.name}: {exc}") from exc
+        return None
+    if not _finite(sim):
+        return None
+    sim.meta["simulation"]["numerical_retry"] = {
+        "failed_rk4_step": first, "rk4_step": smaller, "failure": failure[:300]}
     return sim
+
+
+def _model_failure(exc) -> bool:
+    """A diverging loop, or a plant that refuses this model or fails numerically (e.g. an
+    interface compliance with an estimated arm whose M_h is not positive definite)."""
+    return type(exc).__name__ in ("DivergenceError", "FMUCallError") or isinstance(
+        exc, (FloatingPointError, OverflowError))
+
+
+def _finite(sim) -> bool:
+    return all(np.isfinite(sim.signal(s)).all() for s in ("theta", "tau_h", "tau_m"))

@@ -13,15 +13,17 @@ import math
 import os
 import tempfile
 from dataclasses import dataclass, field
+from itertools import product
 from pathlib import Path
 
 import numpy as np
 from tqdm.auto import tqdm
 
-import trialformat as tf
 
 from . import catalogue as cat
 from .core import VERDICT_EFFECT, VERDICT_NONE, DiagnosisConfig, diagnose
+from .outside import make_model
+from .representation import REPRESENTATIONS, trial_written, write_represented
 
 TRUTH_SUFFIX = ".truth.json"
 
@@ -45,6 +47,13 @@ class SetSpec:
     extra : dict
         Out-of-catalogue truth (plant parameters, e.g. an arm that differs), recorded in
         the truth file; empty for catalogue sets.
+    tuning_override : str
+        Declared tuning when not the one the effects need.
+    representation : str
+        How the trials are stored (representation.REPRESENTATIONS): the project's
+        bit-exact CSV, significant digits, fixed decimals or float32.
+    levels : tuple of int
+        Perturbation levels, one trial per joint, seed and level (default: ``level``).
     """
 
     name: str
@@ -56,6 +65,8 @@ class SetSpec:
     resolution_level: int = 0
     extra: dict = field(default_factory=dict)
     tuning_override: str = ""
+    representation: str = "float64"
+    levels: tuple = ()
 
     def tuning(self) -> str:
         """The declared tuning: ``tuning_override`` if set, else robust when an effect
@@ -67,46 +78,84 @@ class SetSpec:
 
     def truth(self) -> dict:
         return {"effects": [{"name": n, "params": p} for n, p in self.effects],
+                "representation": self.representation,
                 **({"outside_catalogue": self.extra} if self.extra else {})}
 
 
-#: effects outside the catalogue, made with plant parameters the catalogue does not touch:
-#: a heavier motor/transmission inertia Jm (inertia_mismatch scales a1..a3, not Jm) and a
-#: heavier second link (changes a2, a3 but not a1 alike)
+#: effects outside the catalogue. Physically different from every catalogue effect: a
+#: nonlinearity of the limb (stiffness growing with stretch), a dynamic element (a
+#: wobbling soft-tissue mass), a neural one (a delayed stretch reflex) -- active torques of
+#: the limb (outside.py), each at two perturbation levels so that an amplitude dependence
+#: can show -- and plant parameters the catalogue does not touch: a heavier
+#: motor/transmission inertia Jm (inertia_mismatch scales a1..a3, not Jm) and a heavier
+#: second link (changes a2, a3 but not a1 alike). ``draw`` gives the magnitudes.
 OUTSIDE = (
-    {"name": "motor_inertia", "parameters": {"robot.Jm[1]": 0.016, "robot.Jm[2]": 0.016}},
-    {"name": "link2_mass", "parameters": {"robot.m2": 1.5}},
+    {"name": "cubic_stiffness", "levels": (1, 3),
+     "draw": lambda rng: {"human": {"model": "cubic_stiffness",
+                                    "params": {"k3": _log_uniform(rng, 1500.0, 4000.0)}}}},
+    {"name": "wobbling_mass", "levels": (1, 3),
+     "draw": lambda rng: {"human": {"model": "wobbling_mass",
+                                    "params": _wobbling(rng)}}},
+    {"name": "stretch_reflex", "levels": (1, 3),
+     "draw": lambda rng: {"human": {"model": "stretch_reflex",
+                                    "params": {"gain": _log_uniform(rng, 0.3, 0.8),
+                                               "delay_s": float(rng.uniform(0.025, 0.05))}}}},
+    {"name": "motor_inertia", "levels": (),
+     "draw": lambda rng: {"parameters": {"robot.Jm[1]": 0.016, "robot.Jm[2]": 0.016}}},
+    {"name": "link2_mass", "levels": (),
+     "draw": lambda rng: {"parameters": {"robot.m2": 1.5}}},
 )
+
+
+def _log_uniform(rng, lo, hi) -> float:
+    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+
+def _wobbling(rng) -> dict:
+    """Wobbling mass 0.02-0.05 kg m^2 resonating at 4-8 Hz, damping ratio 0.3."""
+    m = _log_uniform(rng, 0.02, 0.05)
+    k = m * (2 * math.pi * float(rng.uniform(4.0, 8.0))) ** 2
+    return {"m": m, "k": k, "c": 2 * 0.3 * math.sqrt(k * m)}
 
 
 def draw_specs(rng: np.random.Generator, *, n_per_effect: int = 1, n_nominal: int = 2,
                n_pairs: int = 2, n_outside: int = 0, pairs: tuple = (),
-               **common) -> list[SetSpec]:
+               representations: tuple | None = None, **common) -> list[SetSpec]:
     """Validation specs: each effect ``n_per_effect`` times at realistic magnitudes,
-    ``n_nominal`` sets with nothing withheld (declared friction and sensor levels
-    drawn 0-2), ``n_pairs`` sets of two effects, ``n_outside`` sets with an effect
-    outside the catalogue."""
+    ``n_nominal`` sets with nothing withheld (declared resolution levels 0-3 in turn, the
+    reference then the robust tuning, friction levels 0-2), ``n_pairs`` sets of two
+    effects, ``n_outside`` sets with an effect outside the catalogue (OUTSIDE in turn).
+    Every set is stored in a representation drawn from ``representations`` (default:
+    all of representation.REPRESENTATIONS)."""
+    reps = tuple(representations or REPRESENTATIONS)
+
+    def rep():
+        return str(reps[int(rng.integers(len(reps)))])
+
     specs = []
     for name, effect in cat.CATALOGUE.items():
         for i in range(n_per_effect):
             specs.append(SetSpec(f"{name}-{i}", ((name, effect.draw(rng)),),
-                                 seeds=(int(rng.integers(1, 10_000)),), **common))
+                                 seeds=(int(rng.integers(1, 10_000)),),
+                                 representation=rep(), **common))
     for i in range(n_nominal):
-        levels = {"friction_level": int(i % 3), "resolution_level": int((i // 3 + i) % 3)}
+        levels = {"friction_level": int(i % 3), "resolution_level": int(i % 4),
+                  "tuning_override": "reference" if (i // 4) % 2 == 0 else "robust"}
         specs.append(SetSpec(f"nominal-{i}", (), seeds=(int(rng.integers(1, 10_000)),),
-                             **{**levels, **common}))
+                             representation=rep(), **{**levels, **common}))
     for i in range(n_outside):
         out = OUTSIDE[i % len(OUTSIDE)]
         specs.append(SetSpec(f"outside-{out['name']}-{i}", (),
                              seeds=(int(rng.integers(1, 10_000)),),
-                             extra={"name": out["name"], "parameters": out["parameters"]},
-                             **common))
+                             extra={"name": out["name"], **out["draw"](rng)},
+                             levels=out["levels"], representation=rep(), **common))
     names = list(cat.CATALOGUE)
     for i in range(n_pairs):
         a, b = pairs[i % len(pairs)] if pairs else rng.choice(names, 2, replace=False)
         specs.append(SetSpec(f"pair-{a}+{b}-{i}", ((a, cat.get_effect(a).draw(rng)),
                                                   (b, cat.get_effect(b).draw(rng))),
-                             seeds=(int(rng.integers(1, 10_000)),), **common))
+                             seeds=(int(rng.integers(1, 10_000)),),
+                             representation=rep(), **common))
     return specs
 
 
@@ -123,18 +172,22 @@ def make_set(spec: SetSpec, folder, *, plant=None) -> Path:
                             resolution_level=spec.resolution_level, tuning=spec.tuning())
     n = setup.n_dof
     effects = {name: cat.expand_effect(name, params, n) for name, params in spec.effects}
-    for seed in spec.seeds:
-        for k in range(1, n + 1):
-            stem = folder / f"{spec.name}_s{seed}_j{k}"
-            if tf.trial_exists(stem) and Path(str(stem) + TRUTH_SUFFIX).is_file():
-                continue
-            trial = simulate_trial(setup, perturbed_dof=k, level=spec.level, seed=seed,
-                                   duration_s=spec.duration_s, effects=effects or None,
-                                   parameters=spec.extra.get("parameters") or None,
-                                   plant=plant, name=stem.name)
-            trial.meta["source"] = "diagnosis validation set (truth withheld)"
-            _atomic_json(Path(str(stem) + TRUTH_SUFFIX), spec.truth())
-            tf.write_trial(stem, trial)
+    human = spec.extra.get("human")
+    levels = spec.levels or (spec.level,)
+    for level, seed, k in product(levels, spec.seeds, range(1, n + 1)):
+        tag = f"_l{level}" if len(levels) > 1 else ""
+        stem = folder / f"{spec.name}{tag}_s{seed}_j{k}"
+        if trial_written(stem) and Path(str(stem) + TRUTH_SUFFIX).is_file():
+            continue
+        model = None if not human else make_model(human["model"], human["params"], n,
+                                                  setup.fs)
+        trial = simulate_trial(setup, perturbed_dof=k, level=level, seed=seed,
+                               duration_s=spec.duration_s, effects=effects or None,
+                               parameters=spec.extra.get("parameters") or None,
+                               plant=plant, name=stem.name, human=model)
+        trial.meta["source"] = "diagnosis validation set (truth withheld)"
+        _atomic_json(Path(str(stem) + TRUTH_SUFFIX), spec.truth())
+        write_represented(stem, trial, spec.representation)
     return folder
 
 
@@ -176,14 +229,19 @@ def score_one(report, truth: dict) -> dict:
     true_names = sorted(e["name"] for e in truth["effects"])
     named = sorted(report.named)
     row = {"truth": true_names, "verdict": report.verdict, "named": named,
+           "representation": truth.get("representation", "float64"),
+           "amplitude_dependent": bool(report.amplitude.get("amplitude_dependent")),
+           "conventions": [c["name"] for c in report.conventions],
            "outside_catalogue": bool(truth.get("outside_catalogue")),
            "nominal_gap": report.gap["nominal_all"],
            "held_out_reduction": report.gap["named_held_out_reduction"],
            "elapsed_s": report.elapsed_s, "n_simulations": report.n_simulations}
     if not true_names:
+        # outside the catalogue: anything but a confident catalogue name is honest
         row["correct"] = report.verdict == VERDICT_NONE if not row["outside_catalogue"] \
             else report.verdict != VERDICT_EFFECT
         row["false_alarm"] = report.verdict != VERDICT_NONE
+        row["confident_wrong_name"] = report.verdict == VERDICT_EFFECT
         return row
     row["top1"] = bool(report.ranking) and report.verdict == VERDICT_EFFECT and \
         report.named[0] in true_names if len(true_names) == 1 else None
@@ -209,14 +267,19 @@ def score_one(report, truth: dict) -> dict:
 
 
 def run_validation(specs, out_dir, *, config: DiagnosisConfig = DiagnosisConfig(),
-                   plant=None, progress: bool = True) -> dict:
+                   plant=None, progress: bool = True, workers: int | None = None,
+                   scheduler=None) -> dict:
     """Make every set, diagnose it blind, score it; write ``score.json`` and ``score.md``.
 
-    Resumable: a set whose ``reports/NAME/score_row.json`` exists is not run again.
+    Resumable: a set whose ``reports/NAME/score_row.json`` exists (written atomically
+    once the set is scored) is not run again. ``workers``/``scheduler``: as
+    :func:`diagnose`.
     """
     out = Path(out_dir)
     rows = []
-    for spec in tqdm(specs, desc="validation sets", disable=not progress, unit="set"):
+    bar = tqdm(specs, desc="validation sets", disable=not progress, unit="set")
+    for spec in bar:
+        bar.set_postfix_str(spec.name)
         row_path = out / "reports" / spec.name / "score_row.json"
         if row_path.is_file():
             rows.append(json.loads(row_path.read_text()))
@@ -224,7 +287,8 @@ def run_validation(specs, out_dir, *, config: DiagnosisConfig = DiagnosisConfig(
         try:
             folder = make_set(spec, out / "sets", plant=plant)
             report = diagnose(folder, out / "reports" / spec.name, config=config,
-                              plant=plant, progress=False)
+                              plant=plant, progress=False, workers=workers,
+                              scheduler=scheduler)
         except Exception as exc:  # a set that cannot be made or diagnosed is reported
             rows.append({"set": spec.name, "error": f"{type(exc).__name__}: {exc}",
                          "truth": sorted(n for n, _ in spec.effects)})
@@ -268,8 +332,22 @@ def summarise(rows) -> dict:
                  if r.get("max_scored_parameter_error") is not None]
     reductions = [r["held_out_reduction"] for r in named_ok
                   if r.get("held_out_reduction") is not None]
+    outside_rows = [r for r in rows if r.get("outside_catalogue")]
+    rates = {
+        "top1": rate(sum(bool(r.get("top1")) for r in single), len(single)),
+        "parameter_within_20pct": rate(sum(e <= 0.2 for e in param_err), len(param_err)),
+        "held_out_reduction_at_least_70pct": rate(sum(v >= 0.7 for v in reductions),
+                                                  len(reductions)),
+        "false_alarm": rate(sum(bool(r["false_alarm"]) for r in nominal), len(nominal)),
+        "outside_confident_wrong_name": rate(
+            sum(r["verdict"] == VERDICT_EFFECT for r in outside_rows), len(outside_rows)),
+        "pair_both_named": rate(sum(bool(r["correct"]) for r in pairs), len(pairs)),
+        "spurious_second_name": rate(sum(bool(r.get("top1")) and len(r["named"]) > 1
+                                         for r in single), len(single)),
+    }
     return {
         "n_sets": len(rows),
+        "rates": rates,
         "top1_accuracy": _mean([1.0 if r.get("top1") else 0.0 for r in single]),
         "n_single": len(single),
         "single_with_extra_effect": [r["set"] for r in single
@@ -292,6 +370,24 @@ def summarise(rows) -> dict:
         "mean_elapsed_s": _mean([r["elapsed_s"] for r in rows]),
         "failed_sets": [{"set": r["set"], "error": r["error"]} for r in failed],
     }
+
+
+def rate(k: int, n: int) -> dict:
+    """k successes out of n with the Wilson 95 % interval (scipy.stats.binomtest)."""
+    if n == 0:
+        return {"k": 0, "n": 0, "rate": None, "ci95": [None, None]}
+    from scipy.stats import binomtest
+    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=0.95, method="wilson")
+    return {"k": int(k), "n": int(n), "rate": k / n, "ci95": [float(ci.low), float(ci.high)]}
+
+
+def rate_text(r: dict) -> str:
+    """``"100 % (20/20; 95 % CI 84-100 %)"``."""
+    if not r["n"]:
+        return "- (0 sets)"
+    lo, hi = r["ci95"]
+    return (f"{100 * r['rate']:.0f} % ({r['k']}/{r['n']}; 95 % CI "
+            f"{100 * lo:.0f}-{100 * hi:.0f} %)")
 
 
 def _per_effect(single) -> dict:
@@ -320,8 +416,21 @@ def score_markdown(summary: dict, rows) -> str:
     s = summary
     med = s["median_parameter_error"]
     med_text = "-" if med is None else f"{100 * med:.1f} %"
-    lines = ["| measure | target | measured |", "|---|---|---|",
-             f"| top-1 accuracy, single effects ({s['n_single']} sets) | >= 90 % | "
+    r = s["rates"]
+    lines = ["| measure | target | measured (Wilson 95 % interval) |", "|---|---|---|",
+             f"| top-1 accuracy, single catalogue effects | >= 95 % | {rate_text(r['top1'])} |",
+             f"| fitted parameter within 20 % (correctly named) | all | "
+             f"{rate_text(r['parameter_within_20pct'])} |",
+             f"| held-out gap reduction >= 70 % (correctly named) | all | "
+             f"{rate_text(r['held_out_reduction_at_least_70pct'])} |",
+             f"| false alarms, nothing withheld | 0 | {rate_text(r['false_alarm'])} |",
+             f"| confident wrong name outside the catalogue | 0 | "
+             f"{rate_text(r['outside_confident_wrong_name'])} |",
+             f"| pairs: both named | - | {rate_text(r['pair_both_named'])} |",
+             f"| single effects named with a spurious second | 0 | "
+             f"{rate_text(r['spurious_second_name'])} |",
+             "", "| measure | target | measured |", "|---|---|---|",
+             f"| top-1 accuracy, single effects ({s['n_single']} sets) | >= 95 % | "
              f"{_pct(s['top1_accuracy'])} |",
              f"| fitted parameter within 20 % (correctly named) | all | "
              f"{_pct(s['parameter_within_20pct'])} (median error "
@@ -344,11 +453,11 @@ def score_markdown(summary: dict, rows) -> str:
     for name, e in s["per_effect"].items():
         lines.append(f"| {name} | {e['n']} | {e['top1']}/{e['n']} | "
                      f"{_pct(e['max_parameter_error'])} | {_pct(e['min_held_out_reduction'])} |")
-    lines += ["", "| set | truth | verdict | named | fitted vs truth (error) | held-out reduction |",
-             "|---|---|---|---|---|---|"]
+    lines += ["", "| set | storage | truth | verdict | named | fitted vs truth (error) | "
+              "held-out reduction |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         if "error" in r:
-            lines.append(f"| {r['set']} | {' + '.join(r['truth'])} | failed: {r['error']} "
+            lines.append(f"| {r['set']} | - | {' + '.join(r['truth'])} | failed: {r['error']} "
                          f"| - | - | - |")
             continue
         err = r.get("parameter_error") or {}
@@ -356,7 +465,9 @@ def score_markdown(summary: dict, rows) -> str:
                          for k, d in err.items()) or "-"
         red = r.get("held_out_reduction")
         below = " (below floor)" if r.get("below_detectability") else ""
-        lines.append(f"| {r['set']}{below} | {' + '.join(r['truth']) or ('outside' if r.get('outside_catalogue') else 'none')} | "
+        amp = " (amplitude-dependent)" if r.get("amplitude_dependent") else ""
+        lines.append(f"| {r['set']}{below} | {r.get('representation', 'float64')} | "
+                     f"{' + '.join(r['truth']) or ('outside' if r.get('outside_catalogue') else 'none')}{amp} | "
                      f"{r['verdict']} | {' + '.join(r['named']) or '-'} | {errs} | "
                      f"{'-' if red is None else f'{100 * red:.0f} %'} |")
     return "\n".join(lines) + "\n"

@@ -8,6 +8,7 @@ and diagnosis packages add their own subcommands through ``register(subparsers)`
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
 import json
 import sys
@@ -70,6 +71,12 @@ def _add_simulate(sub):
     p.add_argument("--comm-step", type=float, default=None,
                    help="communication step [s] (default: the control period)")
     p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
+    p.add_argument("--fs", type=float, default=None,
+                   help="control and sampling rate [Hz] (default: the reference 1000 Hz)")
+    p.add_argument("--rk4-step", type=float, default=None,
+                   help="the plant's internal RK4 step [s]; it must divide the "
+                        "communication step (default: the plant's, or the step nearest it "
+                        "that divides the communication step)")
     p.set_defaults(func=_simulate)
 
 
@@ -82,11 +89,15 @@ def _simulate(args) -> int:
     dof = None if args.dof == "all" else _int(args.dof, "--dof")
     effects = _json(args.effects, "--effects")
     setup = Setup.reference(args.friction, args.resolution, args.tuning, args.arm)
+    if args.fs is not None:
+        setup = dataclasses.replace(setup, fs=float(args.fs))
     if args.no_tde:
         setup = setup.with_controller(time_delay_estimation=False)
     trial = simulate_trial(setup, perturbed_dof=dof, level=args.perturbation, seed=args.seed,
                            duration_s=args.duration, effects=effects, plant=args.fmu,
-                           communication_step_s=args.comm_step, name=Path(args.out).name)
+                           communication_step_s=args.comm_step, name=Path(args.out).name,
+                           parameters=None if args.rk4_step is None else
+                           {"rk4_step": args.rk4_step})
     path = write_trial(args.out, trial)
     print(f"wrote {path} ({trial.n_samples} samples)")
     return 0

@@ -130,8 +130,37 @@ class DelayLine:
         return applied
 
 
+
+class ActiveLimb:
+    """An active torque of the limb in the closed loop (a test model outside the catalogue).
+
+    ``human(n, outputs) -> list`` [N m] is evaluated at sample n from the true plant outputs
+    [theta..., tau_h...] (SI). The limb is rigidly held, so its torque adds to the applied
+    torque over the interval; the torque sensor reads the plant's passive tau_h minus the
+    torque the limb applied over the interval before.
+    """
+
+    def __init__(self, human, n_dof: int):
+        self.human, self.n_dof, self.active = human, n_dof, [0.0] * n_dof
+
+    def wrap(self, sample, push):
+        """The sampler and the command path with the limb's torque in them (SI units)."""
+        n_dof = self.n_dof
+
+        def sample_with_limb(n, outputs):
+            outputs[n_dof:2 * n_dof] = [x - a for x, a in
+                                        zip(outputs[n_dof:2 * n_dof], self.active)]
+            self.active = list(self.human(n, outputs))
+            return sample(n, outputs)
+
+        def push_with_limb(tau_m):
+            applied = tau_m if push is None else push(tau_m)
+            return [x + a for x, a in zip(applied, self.active)]
+
+        return sample_with_limb, push_with_limb
+
 def run_closed_loop(io, controller, sampler, tau_delta, recorder, *, control_period,
-                    n_decimation=1, delay=None, t0=0.0, condition="") -> None:
+                    n_decimation=1, delay=None, t0=0.0, condition="", human=None) -> None:
     """Run the sampled closed loop for ``len(tau_delta)`` control samples.
 
     At sample n (t = t0 + n Ts): read the plant outputs (state at the end of the previous
@@ -159,6 +188,12 @@ def run_closed_loop(io, controller, sampler, tau_delta, recorder, *, control_per
     t0 : float [s]
     condition : str
         Named in a DivergenceError.
+    human : callable, optional
+        ``human(n, outputs) -> list`` [N m]: an active torque of the limb at sample n from
+        the true plant outputs (e.g. a reflex), held over the interval. The limb is
+        rigidly held, so it adds to the applied torque; the torque sensor between robot
+        and limb reads the plant's passive tau_h minus the torque the limb applied over
+        the interval before (a test model of effects outside the catalogue).
 
     Raises
     ------
@@ -171,9 +206,11 @@ def run_closed_loop(io, controller, sampler, tau_delta, recorder, *, control_per
     h = control_period / n_decimation
     read, write, step, names = io.read, io.write, io.step, io.names
     val_in, val_out = io.val_in, io.val_out
-    sample = io.output_converter(sampler.sample)
+    sample, push = sampler.sample, None if delay is None else delay.push
+    if human is not None:
+        sample, push = ActiveLimb(human, len(val_in)).wrap(sample, push)
+    sample, push = io.output_converter(sample), io.input_converter(push)
     control, record = controller.step, recorder.record
-    push = io.input_converter(None if delay is None else delay.push)
     n = 0
     try:
         for n, d in enumerate(tau_delta):

@@ -15,7 +15,7 @@ from trialformat import reference as ref
 
 from .controller import IMBIC
 from .effects import parse_effects
-from .errors import SetupError
+from .errors import RateError, SetupError
 from .master import DelayLine, Recorder, Sampler, check_angles, run_closed_loop, run_open_loop
 from .perturbation import make_perturbation
 from .plant import Plant
@@ -66,7 +66,7 @@ def _resolve_plant(plant, n_dof: int = 2) -> Plant:
 
 def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
                    duration_s=50.0, effects=None, plant=None, parameters=None,
-                   communication_step_s=None, name="") -> Trial:
+                   communication_step_s=None, name="", human=None) -> Trial:
     """Simulate one trial of the closed loop (IMBIC at the control rate on a plant FMU).
 
     Parameters
@@ -93,6 +93,10 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
         Communication step (default: the control period); it must divide the period.
     name : str
         Trial name (used in error messages and as ``Trial.name``).
+    human : callable, optional
+        An active torque of the limb, ``human(n, outputs)`` (master.run_closed_loop);
+        a test model outside the catalogue, recorded as ``repr(human)`` under
+        ``meta["simulation"]["human"]``.
 
     Returns
     -------
@@ -119,6 +123,7 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
     n_dec = plant.decimation(ts, communication_step_s)
     required = dict(hidden.plant_parameters)
     required.update(parameters or {})
+    _choose_rk4_step(plant, required, ts / n_dec)
     absent = plant.start(required, optional=setup.plant_parameters())
 
     sampler, noise_seed = _sampler(setup, hidden, seed, tau_delta.shape[0])
@@ -129,7 +134,7 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
     with _gc_paused():
         run_closed_loop(plant.io, controller, sampler, tau_delta.tolist(), recorder,
                         control_period=ts, n_decimation=n_dec, delay=delay,
-                        condition=condition)
+                        condition=condition, human=human)
     rec = recorder.arrays()
     rec = {"tau_delta": tau_delta, "theta": rec["measured"][:, :n],
            "tau_h": rec["measured"][:, n:], "tau_m": rec["tau_m"]}
@@ -151,6 +156,8 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
         "seed": pert_meta.get("seed"),
         "noise_seed": noise_seed,
     }
+    if human is not None:
+        meta["simulation"]["human"] = repr(human)
     t = np.arange(tau_delta.shape[0]) / fs
     return Trial(meta=meta, t=t, name=name, **rec)
 
@@ -167,6 +174,45 @@ def _gc_paused():
     finally:
         if was_enabled:
             gc.enable()
+
+
+#: the reference plant's internal RK4 step [s] (docs/plant.md)
+REFERENCE_RK4_STEP_S = 1e-5
+
+
+def rk4_step_for(period_s: float, reference_s: float = REFERENCE_RK4_STEP_S) -> float:
+    """The RK4 step nearest ``reference_s`` that divides ``period_s`` a whole number of
+    times: period / round(period / reference) (1e-5 s at 1 kHz, 9.96e-6 s at 1024 Hz,
+    9.77e-6 s at 2048 Hz, 1e-5 s at 500 Hz)."""
+    if not period_s > 0 or not reference_s > 0:
+        raise RateError(f"period {period_s!r} s and RK4 step {reference_s!r} s must be > 0")
+    return period_s / max(1, round(period_s / reference_s))
+
+
+def _choose_rk4_step(plant, required: dict, step_s: float) -> None:
+    """A plant with an ``rk4_step`` parameter left at its default is run with the step
+    nearest that default that divides the communication step (any sample rate); one set
+    by the caller must divide it, else it is refused up front with both values."""
+    if "rk4_step" not in plant.parameters:
+        return
+    if "rk4_step" not in required:
+        default = float(plant.parameters["rk4_step"])
+        chosen = rk4_step_for(step_s, default)
+        if chosen != default:
+            required["rk4_step"] = chosen
+        return
+    check_rk4_step(required["rk4_step"], step_s)
+
+
+def check_rk4_step(rk4_step, step_s: float) -> None:
+    """Refuse up front a plant RK4 step that does not divide the communication step."""
+    if rk4_step is None:
+        return
+    ratio = step_s / float(rk4_step)
+    if not float(rk4_step) > 0 or round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
+        raise RateError(f"the plant's rk4_step {rk4_step!r} s does not divide the "
+                        f"communication step {step_s!r} s (ratio {ratio:.9g}); use "
+                        f"rk4_step = {rk4_step_for(step_s, float(rk4_step) if float(rk4_step) > 0 else REFERENCE_RK4_STEP_S)!r} s")
 
 
 def _perturbation(setup, perturbed_dof, perturbation, level, seed, duration_s):

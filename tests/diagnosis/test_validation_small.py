@@ -11,6 +11,7 @@ first, then replaced by unparsable text, and every file the diagnosis opens is r
 """
 
 import builtins
+import dataclasses
 import io
 import json
 from pathlib import Path
@@ -23,7 +24,7 @@ from diagnosis import VERDICT_EFFECT, VERDICT_NONE, DiagnosisConfig, diagnose  #
 from diagnosis.catalogue import relative_parameter_error  # noqa: E402
 from diagnosis.validation import SetSpec, make_set, read_truth  # noqa: E402
 
-CONFIG = DiagnosisConfig(effects=("gravity", "sensor_noise", "friction"),
+CONFIG = DiagnosisConfig(effects=("gravity", "sensor_noise", "friction", "quantization"),
                          grid_points=4, refine_iterations=4)
 CONFIG_NOMINAL = DiagnosisConfig(effects=("gravity",), grid_points=3, refine_iterations=0)
 DURATION_S = 9.0
@@ -34,7 +35,18 @@ SPECS = {
     "sensor_noise": SetSpec("sensor_noise", (("sensor_noise", {"theta_noise_std_rad": 1.5e-5,
                                                                "tau_noise_std_nm": 0.01}),),
                             seeds=(47,), duration_s=DURATION_S),
+    "quantization": SetSpec("quantization", (("quantization", {
+        "encoder_resolution_deg": 0.0037, "torque_resolution_nm": 0.0113}),), seeds=(53,),
+        duration_s=DURATION_S),
 }
+#: the same trials re-written by other writers (item 1 of issue 8): the verdict, the named
+#: effect and its fitted value (5 %) must not depend on how the numbers were stored
+VARIANTS = {"gravity@sig6": ("gravity", "sig6"), "gravity@float32_mat": ("gravity", "float32_mat"),
+            "quantization@sig7": ("quantization", "sig7"),
+            "quantization@float32_csv": ("quantization", "float32_csv")}
+for _name, (_base, _rep) in VARIANTS.items():
+    SPECS[_name] = dataclasses.replace(SPECS[_base], name=_name.replace("@", "-"),
+                                       representation=_rep)
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +96,7 @@ def test_nothing_withheld_raises_no_alarm(reports):
     assert reports["nominal"].named == []
 
 
-@pytest.mark.parametrize("name", ["gravity", "sensor_noise"])
+@pytest.mark.parametrize("name", ["gravity", "sensor_noise", "quantization"])
 def test_withheld_effect_is_named_fitted_and_closes_the_held_out_gap(name, reports, truths):
     report = reports[name]
     truth = truths[name]["effects"][0]
@@ -116,3 +128,52 @@ def test_diagnosis_reads_the_trials_but_never_a_truth_file(reports, opened_files
     assert any(f.endswith(".csv") for f in opened_files)
     assert any(f.endswith(".json") and not f.endswith(".truth.json") for f in opened_files)
     assert not [f for f in opened_files if f.endswith(".truth.json")]
+
+
+@pytest.mark.parametrize("variant", sorted(VARIANTS))
+def test_the_verdict_does_not_depend_on_how_the_numbers_were_stored(variant, reports):
+    base = reports[VARIANTS[variant][0]]
+    other = reports[variant]
+    assert (other.verdict, other.named) == (base.verdict, base.named)
+    for effect, params in base.fitted.items():
+        for key, value in params.items():
+            assert other.fitted[effect][key] == pytest.approx(value, rel=0.05), (variant, key)
+    storage = other.where["storage"]
+    assert any("float64" not in " ".join(v for cols in s.values() for v in cols)
+               for s in storage.values())
+
+
+@pytest.mark.parametrize("convention", ["absolute angles + torque sign", "degrees"])
+def test_a_convention_of_the_files_is_a_named_finding_not_a_gap(convention, sets,
+                                                                tmp_path_factory):
+    """Issue 8, item 2: the nominal set re-written as a lab might have logged it."""
+    import numpy as np
+
+    import trialformat as tf
+    from diagnosis import VERDICT_CONVENTION
+    out = tmp_path_factory.mktemp("convention")
+    for t in tf.read_trials(sets["nominal"]):
+        if convention == "degrees":
+            t = dataclasses.replace(t, theta=np.degrees(t.theta))
+        else:
+            t = dataclasses.replace(t, theta=t.theta + np.radians(t.meta["posture_deg"]),
+                                    tau_h=-t.tau_h)
+        tf.write_trial(out / t.name, t)
+    report = diagnose(out, out / "report", progress=False, config=CONFIG_NOMINAL)
+    expected = {"degrees": {"angles in degrees"},
+                "absolute angles + torque sign": {"angles absolute", "torque sign reversed"}}
+    assert {c["name"] for c in report.conventions} == expected[convention]
+    assert report.verdict == VERDICT_CONVENTION
+    assert report.gap["nominal_all"] <= report.gap["significance_threshold"]
+
+
+def test_one_process_gives_the_same_diagnosis_as_the_parallel_one(sets, reports,
+                                                                  tmp_path_factory):
+    """Issue 8, item 6: parallel simulations change the time, not the result."""
+    out = tmp_path_factory.mktemp("one_process")
+    single = diagnose(sets["gravity"], out, progress=False, config=CONFIG, workers=1)
+    parallel = reports["gravity"]
+    assert (single.verdict, single.named, single.fitted) == \
+        (parallel.verdict, parallel.named, parallel.fitted)
+    assert [r["calibration_gap"] for r in single.ranking] == \
+        [r["calibration_gap"] for r in parallel.ranking]

@@ -1,0 +1,176 @@
+"""Conventions and set-up mismatches of measured trials: findings, not model errors.
+
+A lab's file may follow another convention than log-format.md without declaring it: angles
+logged as absolute joint angles where deviations from the posture are expected, the
+interaction torque with the opposite sign, angles in degrees, ``t`` printed with finitely
+many decimals. Such a mismatch would otherwise show up as a huge, "unexplained" gap. Each
+is checked here from the data and the declared set-up alone (physical arguments, no
+simulation), reported by name, and corrected before the diagnosis proper:
+
+- declared conventions (log-format.md, "Conventions a lab states in the metadata"):
+  ``"angles": "absolute"`` and ``"sensors": {"torque_sign": -1}`` are applied;
+- **absolute angles**: the mean angle of every joint equals its posture (within 0.05 rad
+  and a fifth of the posture) while deviations are declared;
+- **angles in degrees**: a deviation beyond the master's angle limit (2 rad), which no
+  trial of this set-up can have, that becomes a plausible one (< 0.5 rad) in radians;
+- **torque sign reversed**: the arm impedance estimated from the trials has a negative
+  stiffness on every joint (a passive limb's is positive), and a positive one with -tau_h;
+- **t rounded**: ``t`` differs from n / fs (its storage rounded it); the trial is read on
+  the uniform grid n / fs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .storage import detect_storage
+
+#: deviations are at most this in any trial the master runs (orchestrator ANGLE_LIMIT_RAD)
+ANGLE_LIMIT_RAD = 2.0
+PLAUSIBLE_DEVIATION_RAD = 0.5
+ABSOLUTE_TOLERANCE_RAD = 0.05
+
+
+@dataclasses.dataclass
+class Finding:
+    """A convention or set-up mismatch found in the measured trials.
+
+    Attributes
+    ----------
+    name : str
+        ``angles absolute``, ``angles in degrees``, ``torque sign reversed``,
+        ``t rounded`` (or ``declared: ...`` for a declared convention applied).
+    where : str
+        Signal and trials concerned.
+    evidence : str
+        The numbers that show it.
+    corrected : bool
+        The diagnosis corrected the data and went on.
+    """
+
+    name: str
+    where: str
+    evidence: str
+    corrected: bool = True
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def text(self) -> str:
+        return f"{self.name} ({self.where}): {self.evidence}" + (
+            "; corrected" if self.corrected else "")
+
+
+def _replace(trial, scale=None, offset=None, **arrays):
+    """A corrected copy; its storage context is the raw trial's, seen through the
+    correction corrected = raw * scale - offset (per signal), so that simulations are
+    still stored as the raw numbers were."""
+    from .core import storage_context
+    raw = storage_context(trial)
+    out = dataclasses.replace(trial, **arrays)
+    out._storage_context = raw.converted(scale or {}, offset or {})
+    return out
+
+
+def reader_applies_conventions() -> bool:
+    """True when the trial reader itself returns declared conventions converted (the
+    readers of log-format.md "Lab data": trialformat.finish_trial); they must then not be
+    applied twice."""
+    import trialformat.logs as logs
+    return hasattr(logs, "finish_trial")
+
+
+def apply_declared(trials) -> tuple[list, list]:
+    """Apply the conventions the metadata declare; returns (trials, findings)."""
+    out, findings = [], []
+    if reader_applies_conventions():
+        for t in trials:
+            if str(t.meta.get("angles", "")).lower() == "absolute":
+                findings.append(Finding("declared: angles absolute", t.name,
+                                        "posture subtracted by the reader"))
+            if (t.meta.get("sensors") or {}).get("torque_sign", 1) == -1:
+                findings.append(Finding("declared: torque_sign -1", t.name,
+                                        "tau_h negated by the reader"))
+        return list(trials), findings
+    for t in trials:
+        changes = {}
+        if str(t.meta.get("angles", "")).lower() == "absolute":
+            posture = np.radians(np.asarray(t.meta["posture_deg"], dtype=float))
+            changes["theta"] = t.theta - posture[None, :]
+            changes["offset"] = {"theta": posture}
+            findings.append(Finding("declared: angles absolute", t.name,
+                                    "posture subtracted from theta"))
+        sign = (t.meta.get("sensors") or {}).get("torque_sign", 1)
+        if sign == -1:
+            changes["tau_h"] = -t.tau_h
+            changes["scale"] = {"tau_h": -1.0}
+            findings.append(Finding("declared: torque_sign -1", t.name, "tau_h negated"))
+        out.append(_replace(t, **changes) if changes else t)
+    return out, findings
+
+
+def check_angles(trials) -> tuple[list, list]:
+    """Absolute angles and angles in degrees (see module docstring)."""
+    findings = []
+    posture = np.radians(np.asarray(trials[0].meta["posture_deg"], dtype=float))
+    theta = np.vstack([t.theta for t in trials])
+    mean = theta.mean(axis=0)
+    spread = np.max(np.abs(theta - mean), axis=0)
+    degrees = bool(np.any(spread > ANGLE_LIMIT_RAD)
+                   and np.all(np.radians(spread) < PLAUSIBLE_DEVIATION_RAD))
+    scale = math.pi / 180.0 if degrees else 1.0
+    if degrees:
+        findings.append(Finding(
+            "angles in degrees", "theta, all trials",
+            f"largest deviation {np.round(spread, 3).tolist()} beyond the {ANGLE_LIMIT_RAD} "
+            f"rad any trial of this set-up can have; {np.round(np.radians(spread), 4).tolist()}"
+            f" rad in degrees"))
+    mean_rad = mean * scale
+    near = np.abs(mean_rad - posture) < np.minimum(ABSOLUTE_TOLERANCE_RAD,
+                                                    0.2 * np.abs(posture))
+    absolute = bool(np.all(near) and np.all(np.abs(posture) > ABSOLUTE_TOLERANCE_RAD))
+    if absolute:
+        findings.append(Finding(
+            "angles absolute", "theta, all trials",
+            f"mean angle {np.round(mean_rad, 4).tolist()} rad equals the posture "
+            f"{np.round(posture, 4).tolist()} rad while deviations are declared"))
+    if not findings:
+        return trials, findings
+    offset = posture if absolute else 0.0
+    out = [_replace(t, scale={"theta": scale}, offset={"theta": offset},
+                    theta=t.theta * scale - offset) for t in trials]
+    return out, findings
+
+
+def check_time(trials) -> list:
+    """``t`` stored rounded (its values differ from n / fs): a finding, the diagnosis
+    uses n / fs."""
+    findings = []
+    for t in trials:
+        exact = np.arange(t.n_samples) / t.fs
+        off = np.max(np.abs(t.t - exact))
+        if off > 0 and off > 4 * np.finfo(float).eps * exact[-1]:
+            storage = detect_storage(t.t)
+            findings.append(Finding(
+                "t rounded", t.name,
+                f"t stored as {storage.describe()}, up to {off:.3g} s from n/fs; read as "
+                f"uniform at fs = {t.fs:g} Hz"))
+    return findings
+
+
+def check_torque_sign(trials, arm, estimate) -> tuple[list, object, list]:
+    """A negative arm stiffness on every joint that turns positive with -tau_h means the
+    torque was logged with the opposite sign. ``estimate(trials) -> ArmModel``."""
+    if not np.all(np.diag(arm.K) < 0):
+        return trials, arm, []
+    flipped = [_replace(t, scale={"tau_h": -1.0}, tau_h=-t.tau_h) for t in trials]
+    arm_f = estimate(flipped)
+    if not np.all(np.diag(arm_f.K) > 0):
+        return trials, arm, []
+    return flipped, arm_f, [Finding(
+        "torque sign reversed", "tau_h, all trials",
+        f"arm stiffness estimated {np.round(np.diag(arm.K), 3).tolist()} N m/rad (a "
+        f"passive limb's is positive); {np.round(np.diag(arm_f.K), 3).tolist()} with -tau_h")]
