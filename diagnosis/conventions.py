@@ -147,13 +147,15 @@ def check_angles(trials) -> tuple[list, list]:
 
 def check_time(trials) -> list:
     """``t`` stored rounded (its values differ from n / fs): a finding, the diagnosis
-    uses n / fs."""
+    uses n / fs. The stored values are ``Trial.t_stored`` when the reader kept them (it
+    returns ``t`` as the exact grid), else ``Trial.t``."""
     findings = []
     for t in trials:
+        stored = t.t if getattr(t, "t_stored", None) is None else t.t_stored
         exact = np.arange(t.n_samples) / t.fs
-        off = np.max(np.abs(t.t - exact))
+        off = np.max(np.abs(stored - exact))
         if off > 0 and off > 4 * np.finfo(float).eps * exact[-1]:
-            storage = detect_storage(t.t)
+            storage = detect_storage(stored)
             findings.append(Finding(
                 "t rounded", t.name,
                 f"t stored as {storage.describe()}, up to {off:.3g} s from n/fs; read as "

@@ -48,6 +48,9 @@ class Trial:
         File stem (``NAME``), empty for a trial not read from disk.
     filled_defaults : list of str
         Metadata keys the reader filled from the reference configuration.
+    t_stored : ndarray [s], shape (N,), or None
+        ``t`` as the file stored it, when that differs from the exact grid ``t`` (printed
+        with finite decimals or in single precision); None otherwise.
     """
 
     meta: dict
@@ -60,6 +63,7 @@ class Trial:
     name: str = ""
     filled_defaults: list = field(default_factory=list)
     theta_ref: np.ndarray | None = None
+    t_stored: np.ndarray | None = None
 
     @property
     def perturbation_kind(self) -> str:
@@ -248,7 +252,10 @@ def finish_trial(meta: dict, arrays: dict, name: str, filled: list, where, *,
     """Build, check and convert a trial from its arrays (shared by the CSV and .mat readers)."""
     trial = Trial(meta=meta, name=name, filled_defaults=filled, **arrays)
     check_trial(trial, where, min_samples=min_samples)
-    trial.t = np.arange(trial.n_samples) / trial.fs
+    exact = np.arange(trial.n_samples) / trial.fs
+    if not np.array_equal(trial.t, exact):
+        trial.t_stored = trial.t
+    trial.t = exact
     for s, value in _convention(meta, trial).items():
         setattr(trial, s, value)
     if filled:

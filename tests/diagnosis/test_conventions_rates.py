@@ -120,3 +120,22 @@ def test_trials_at_other_rates_are_simulated_at_their_rate(fs, make_linear_trial
     sim = simulate_like(trial, setup, {}, 600)
     assert sim is not None and sim.fs == fs and sim.n_samples == 600
     assert sim.meta["simulation"]["rk4_step"] == pytest.approx(rk4_step_for(1.0 / fs))
+
+
+def test_rounded_time_column_read_from_a_file_is_a_finding(make_linear_trial, tmp_path):
+    """The reader returns t as the exact grid; the stored values still reach the finding."""
+    import pandas as pd
+
+    from trialformat import read_trial, write_trial
+
+    t = make_linear_trial()
+    t = dataclasses.replace(t, meta=dict(t.meta, fs=2048.0), t=np.arange(t.n_samples) / 2048.0)
+    csv = write_trial(tmp_path / "exact", t)
+    frame = pd.read_csv(csv)
+    frame.to_csv(tmp_path / "rounded.csv", index=False, float_format="%.6f")
+    (tmp_path / "rounded.json").write_text((tmp_path / "exact.json").read_text())
+    exact, rounded = read_trial(tmp_path / "exact"), read_trial(tmp_path / "rounded")
+    assert exact.t_stored is None and check_time([exact]) == []
+    np.testing.assert_array_equal(rounded.t, exact.t)
+    (finding,) = check_time([rounded])
+    assert finding.name == "t rounded" and "6 decimals" in finding.evidence
