@@ -27,7 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import fmpy
-from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, free)
 from fmpy.fmi3 import FMU3Slave
 from fmpy.model_description import ValidationError
 
@@ -367,6 +368,56 @@ def step_error(status: int, t: float, h: float, name: str = "fmi2DoStep") -> FMU
                         f"{_STATUS.get(status, status)}")
 
 
+class PlantLog:
+    """The plant's log messages, kept instead of printed: an FMI call that fails raises an
+    exception that carries them (a plant refused inside a search prints nothing).
+
+    ``messages`` holds the last ``size`` messages as ``"[STATUS] text"``; the FMI 2.0
+    logger is variadic, so fmpy's native proxy formats the text before it reaches Python.
+    """
+
+    _LABELS = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
+
+    def __init__(self, size: int = 8):
+        from collections import deque
+        self.messages = deque(maxlen=size)
+        self._fmi2 = None
+        self._fmi3 = None
+
+    def _keep(self, status, message) -> None:
+        label = self._LABELS[status] if 0 <= status < len(self._LABELS) else str(status)
+        text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
+        self.messages.append(f"[{label}] {text}")
+
+    def fmi2_callbacks(self):
+        """fmi2CallbackFunctions whose logger keeps the messages (kept alive by self)."""
+        if self._fmi2 is None:
+            cb = fmi2CallbackFunctions()
+            cb.logger = fmi2CallbackLoggerTYPE(
+                lambda env, name, status, category, message: self._keep(status, message))
+            cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+            cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+            from fmpy.logging import addLoggerProxy
+            addLoggerProxy(ctypes.byref(cb))
+            self._fmi2 = cb
+        return self._fmi2
+
+    def fmi3_logger(self):
+        """The FMI 3.0 logMessage callback (plain text, no formatting)."""
+        if self._fmi3 is None:
+            self._fmi3 = lambda env, status, category, message: self._keep(status, message)
+        return self._fmi3
+
+    def explain(self, exc: Exception) -> FMUCallError:
+        """``exc`` as an FMUCallError that ends with the plant's messages since the last
+        call of this method (the messages are then cleared)."""
+        text = str(exc)
+        if self.messages:
+            text += " -- the plant logged: " + " | ".join(self.messages)
+            self.messages.clear()
+        return FMUCallError(text)
+
+
 class Plant:
     """A plant FMU that keeps the contract: loaded once, reset between trials.
 
@@ -394,6 +445,8 @@ class Plant:
         Parameter name -> start value (as declared, float for Real).
     reinstantiated : int
         How many times a new instance replaced one whose reset did not work.
+    log : PlantLog
+        The plant's log messages; they end the message of a failing call's FMUCallError.
 
     Raises
     ------
@@ -423,6 +476,7 @@ class Plant:
         self._closed = False
         self._reset_unusable = ""     # why reset cannot be trusted ("" while it can)
         self.reinstantiated = 0
+        self.log = PlantLog()
         try:
             self._instantiate()
         except Exception:
@@ -438,8 +492,10 @@ class Plant:
         cls = FMU2Slave if self.fmi_version == 2 else FMU3Slave
         fmu = cls(guid=md.guid, unzipDirectory=self._unzip_dir,
                   modelIdentifier=md.coSimulation.modelIdentifier, instanceName=self.instance_name)
+        logger = ({"callbacks": self.log.fmi2_callbacks()} if self.fmi_version == 2
+                  else {"logMessage": self.log.fmi3_logger()})
         _fmi(self._fn("InstantiateCoSimulation" if self.fmi_version == 3 else "Instantiate"),
-             fmu.instantiate, loggingOn=False)
+             fmu.instantiate, loggingOn=False, **logger)
         old, self._fmu = self._fmu, fmu
         if old is not None:
             _free(old)
@@ -480,7 +536,10 @@ class Plant:
         values.update(parameters)
         while True:
             fresh = self._fresh_instance()
-            self._initialize(values, start_time)
+            try:
+                self._initialize(values, start_time)
+            except FMUCallError as exc:
+                raise self.log.explain(exc) from exc
             off = self._start_state_error()
             if off is None:
                 return skipped

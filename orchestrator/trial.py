@@ -15,7 +15,7 @@ from trialformat import reference as ref
 
 from .controller import IMBIC
 from .effects import parse_effects
-from .errors import RateError, SetupError
+from .errors import FMUCallError, RateError, SetupError
 from .master import DelayLine, Recorder, Sampler, check_angles, run_closed_loop, run_open_loop
 from .perturbation import make_perturbation
 from .plant import Plant
@@ -132,9 +132,12 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
     recorder = Recorder(("measured", "tau_m"))
     condition = _condition(name, setup, perturbed_dof, pert_meta, hidden.normalized)
     with _gc_paused():
-        run_closed_loop(plant.io, controller, sampler, tau_delta.tolist(), recorder,
-                        control_period=ts, n_decimation=n_dec, delay=delay,
-                        condition=condition, human=human)
+        try:
+            run_closed_loop(plant.io, controller, sampler, tau_delta.tolist(), recorder,
+                            control_period=ts, n_decimation=n_dec, delay=delay,
+                            condition=condition, human=human)
+        except FMUCallError as exc:
+            raise plant.log.explain(exc) from exc
     rec = recorder.arrays()
     rec = {"tau_delta": tau_delta, "theta": rec["measured"][:, :n],
            "tau_h": rec["measured"][:, n:], "tau_m": rec["tau_m"]}
