@@ -143,7 +143,8 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
             if res["curves"]:
                 curves[res["condition"]] = res["curves"]
         if not rows:
-            raise EstimationError(f"no condition could be estimated: {skipped}")
+            reasons = sorted({f"{k['condition']}: {k['reason']}" for k in skipped})
+            raise EstimationError("no condition could be estimated: " + "; ".join(reasons))
         figures = [("fig2_impedance.png", "fig2",
                     (curves, arm, variants, TRUTH_LABELS.get(truth)))]
         for name in variants:
