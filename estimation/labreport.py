@@ -170,7 +170,7 @@ def bode(result):
     f = result.f[sel]
     in_band = (f >= result.band_hz[0]) & (f <= result.band_hz[1])
     caption = _parameter_caption(result)
-    width = 4.2 * n * n + 1 if n <= 2 else 4.4 * n
+    width = max(4.2 * n * n + 1, 6.5) if n <= 2 else 4.4 * n
     height = (6.6 if n <= 2 else 6.6 * n) + 0.9 + 0.22 * len(caption)
     fig = plt.figure(figsize=(width, height))
     axes = element_axes(fig, n, ("mag", "phase", "coherence"))
@@ -195,12 +195,13 @@ def bode(result):
             ax_c.set_xlabel("frequency [Hz]")
     axes[(0, 0)][0].legend(fontsize=8)
     fig.suptitle(f"{result.label}: {result.method}, fit band {result.band_hz[0]:g}-"
-                 f"{result.band_hz[1]:g} Hz (shaded); estimate's phase in the band "
-                 f"where coherence >= {PHASE_MIN_COHERENCE:g}", fontsize=10)
+                 f"{result.band_hz[1]:g} Hz (shaded)\n"
+                 f"estimate's phase drawn in the band where coherence >= "
+                 f"{PHASE_MIN_COHERENCE:g}", fontsize=10)
     bottom = (0.25 + 0.22 * len(caption)) / height
     fig.text(0.5, 0.15 / height, "\n".join(caption), ha="center", va="bottom", fontsize=9,
              family="monospace")
-    fig.tight_layout(rect=(0, bottom, 1, 1 - 0.45 / height))
+    fig.tight_layout(rect=(0, bottom, 1, 1 - 0.6 / height))
     return fig
 
 
