@@ -352,12 +352,14 @@ def conditions_markdown(rows, arm) -> str:
     for r in rows:
         lines.append("| " + " | ".join(_fmt(r.get(c)) for c in cols) + " |")
     legend = ("\nvaf_min [%], r2_min, coh_min: worst element; err_*_max [%]: largest "
-              "|relative error| of the fitted parameter over the four elements.\n")
+              "|relative error| of the fitted parameter over all elements, each relative to "
+              "its own true value.\n")
     return "\n".join(lines) + "\n" + legend
 
 
 def parameter_tables(rows, arm, out) -> list:
-    """Fitted M, B, K per element and variant: Table I, mean, worst error over conditions."""
+    """Fitted M, B, K per element and variant: the true value (Table I or reference-3dof),
+    mean, worst error over conditions."""
     table = []
     for name, *_ in VARIANTS:
         sel = [r for r in rows if r["variant"] == name]
@@ -371,7 +373,7 @@ def parameter_tables(rows, arm, out) -> list:
                         "fitted_max": vals.max()}
                 if true is not None:
                     errs = np.array([r[f"err_{p}_{e}"] for r in sel])
-                    line.update(table_I=float(true[int(e[0]) - 1, int(e[1]) - 1]),
+                    line.update(true_value=float(true[int(e[0]) - 1, int(e[1]) - 1]),
                                 err_mean_pct=errs.mean(),
                                 err_worst_pct=errs[np.argmax(np.abs(errs))])
                 table.append(line)
