@@ -119,3 +119,15 @@ def test_three_joint_bode_is_a_grid_with_phase_masked_out_of_band():
         y = ax.lines[0].get_ydata()  # the estimate
         finite = y[np.isfinite(y)]
         assert np.abs(np.diff(finite)).max() < 90  # no +-180 deg bars
+
+
+def test_paper_kind_of_three_joints_compares_with_reference_3dof(tmp_path, capsys):
+    for k in (1, 2, 3):
+        tf.write_trial(tmp_path / "in" / f"arm3_dof{k}", synthetic_trial(
+            perturbed_dof=k, arm=ARM_3DOF, controller=CONTROLLER_3DOF, peak=PEAK_3DOF,
+            seed=20 + k, duration_s=12.0))
+    assert main(["figures", str(tmp_path / "in"), "--kind", "paper", "--out",
+                 str(tmp_path / "rep"), "--compare", "none"]) == 0
+    legend = (tmp_path / "rep" / "table_summary.md").read_text()
+    assert "against the 3-joint reference (reference-3dof)" in legend
+    assert "Table I" not in legend
