@@ -55,7 +55,8 @@ def _analysis_arguments(p, truth_default="none") -> None:
                    default=truth_default,
                    help="known answer of simulated trials: Table I (2 joints) or "
                         "reference-3dof.md; none for lab data"
-                        + ("; auto: table1 for the paper kind" if truth_default == "auto"
+                        + ("; auto: for the paper kind table1 (2 joints) or "
+                           "reference-3dof (3 joints), else none" if truth_default == "auto"
                            else ""))
 
 
@@ -184,7 +185,10 @@ def run_figures(args) -> int:
     if kind == "auto":
         kind = "paper" if _paper_kind(trials) else "lab"
     if kind == "paper":
-        truth = "table1" if args.truth in ("auto", "table1") else "none"
+        truth = args.truth
+        if truth == "auto":  # the known answer of this project's simulated arms
+            n = max(t.n_dof for t in trials)
+            truth = {2: "table1", 3: "reference-3dof"}.get(n, "none")
         compare = None if args.compare.lower() == "none" else args.compare
         result = make_report(args.folders, args.out, truth=truth, variant=args.fig_variant,
                              compare=compare)

@@ -4,8 +4,9 @@
 
 - ``frf_LABEL.csv`` / ``frf_LABEL.json``: frequency [Hz], magnitude [N m/rad], phase [deg]
   and coherence [-] of every element Z_ik, with the fitted model's magnitude and phase;
-- ``bode_LABEL.png``: magnitude, phase and coherence of every element (n x n columns of
-  panels), the estimate, the fitted model and the band;
+- ``bode_LABEL.png``: magnitude, unwrapped phase (where coherent) and coherence of every
+  element (one column per element for 1-2 joints, an n x n grid for n >= 3), the
+  estimate, the fitted model and the band, the fitted parameters in a caption;
 
 and for all results ``parameters.csv`` / ``parameters.md`` (M, B, K with confidence
 intervals and units, R^2, VAF, coherence per element) and ``results.json`` (everything,
@@ -122,8 +123,8 @@ def parameters_markdown(results) -> str:
                      f"of {r.welch['nperseg']}, corrections: "
                      f"sampling {'on' if r.corrections['left_limit_sampling'] else 'off'}, "
                      f"leakage {'on' if r.corrections['window_leakage'] else 'off'}\n")
-        head = ["element"] + [f"{p} [{UNITS[p]}]" for p in "MBK"] + ["R^2", "VAF [%]",
-                                                                      "coherence"]
+        head = (["element"] + [f"{symbol(p, r.n_dof)} [{UNITS[p]}]" for p in "MBK"]
+                + ["R^2", "VAF [%]", "coherence"])
         lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         conf = int(round(100 * r.fit.confidence))
         for i, k in element_indices(r.n_dof):
@@ -135,45 +136,79 @@ def parameters_markdown(results) -> str:
                       f"{r.coherence_band[i, k]:.3f}"]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append(f"\n± : {conf} % confidence interval half-widths. "
-                     + ("1 joint: M is the inertia I.\n" if r.n_dof == 1 else "\n"))
+                     + ("1 joint: I is the inertia (column M in parameters.csv and "
+                        "results.json).\n" if r.n_dof == 1 else "\n"))
         lines += [f"- warning: {w}" for w in r.warnings] + [""]
     return "\n".join(lines)
 
 
+def symbol(p: str, n_dof: int) -> str:
+    """Name of parameter ``p`` ("M", "B", "K") shown to a user: the inertia of one joint is
+    I (the CLI's and the docs' name), of n joints the matrix M. Machine-readable files keep
+    the key M for every joint count."""
+    return "I" if p == "M" and n_dof == 1 else p
+
+
+#: The estimate's phase is drawn only in the fit band and where the element's coherence
+#: reaches this: elsewhere the phase of a noise-dominated FRF wanders over +-180 deg.
+PHASE_MIN_COHERENCE = 0.5
+
+
 def bode(result):
-    """Magnitude, phase and coherence of every element; estimate, fitted model and band."""
+    """Magnitude, phase and coherence of every element; estimate, fitted model and band.
+
+    Elements laid out as in the report's Fig. 2 (estimation.report.element_axes). The
+    estimate's phase is unwrapped and drawn in the fit band where the coherence is at least
+    :data:`PHASE_MIN_COHERENCE`; the fitted K, B, M (I for one joint) are in a caption below
+    the panels (and in parameters.md).
+    """
+    from .report import element_axes, unwrapped_phase_deg
+
     n = result.n_dof
     f_max = min(2 * result.band_hz[1], result.fs / 2)
     sel = (result.f > 0) & (result.f <= f_max)
     f = result.f[sel]
-    fig, axes = plt.subplots(3 * n, n, figsize=(4.2 * n + 1, 6.6 * n + 0.6), sharex=True,
-                             squeeze=False)
-    for i, k in element_indices(n):
+    in_band = (f >= result.band_hz[0]) & (f <= result.band_hz[1])
+    caption = _parameter_caption(result)
+    width = max(4.2 * n * n + 1, 6.5) if n <= 2 else 4.4 * n
+    height = (6.6 if n <= 2 else 6.6 * n) + 0.9 + 0.22 * len(caption)
+    fig = plt.figure(figsize=(width, height))
+    axes = element_axes(fig, n, ("mag", "phase", "coherence"))
+    for (i, k), (ax_m, ax_p, ax_c) in axes.items():
         z, m, c = result.Z[sel, i, k], result.model[sel, i, k], result.coherence[sel, i, k]
-        ax_m, ax_p, ax_c = axes[3 * i, k], axes[3 * i + 1, k], axes[3 * i + 2, k]
         e = f"Z{i + 1}{k + 1}" if n > 1 else "Z"
         ax_m.loglog(f, np.abs(z), color="tab:blue", lw=1.0, label="estimate")
-        ax_m.loglog(f, np.abs(m), "k--", lw=1.2, label="fitted M, B, K")
-        ax_p.semilogx(f, np.degrees(np.angle(z)), color="tab:blue", lw=1.0)
-        ax_p.semilogx(f, np.degrees(np.angle(m)), "k--", lw=1.2)
+        ax_m.loglog(f, np.abs(m), "k--", lw=1.2, label="fitted model")
+        ax_p.semilogx(f, unwrapped_phase_deg(z, in_band & (c >= PHASE_MIN_COHERENCE)), color="tab:blue",
+                      lw=1.0)
+        ax_p.semilogx(f, unwrapped_phase_deg(m), "k--", lw=1.2)
         ax_c.semilogx(f, c, color="tab:green", lw=1.0)
         ax_c.set_ylim(0, 1.05)
-        ax_m.set_title(e)
+        ax_m.set_title(e, fontsize=10)
         ax_m.set_ylabel(f"|{e}| [N m/rad]")
         ax_p.set_ylabel("phase [deg]")
         ax_c.set_ylabel("coherence [-]")
         for ax in (ax_m, ax_p, ax_c):
             ax.axvspan(max(result.band_hz[0], f[0]), result.band_hz[1], color="0.9", zorder=0)
             ax.grid(True, which="both", alpha=0.3)
-    for ax in axes[-1]:
-        ax.set_xlabel("frequency [Hz]")
-    axes[0, 0].legend(fontsize=8)
-    text = "; ".join(f"{p} = " + _matrix_text(getattr(result.fit, p)) + f" {UNITS[p]}"
-                     for p in ("K", "B", "M"))
-    fig.suptitle(f"{result.label}: {result.method}, band {result.band_hz[0]:g}-"
-                 f"{result.band_hz[1]:g} Hz (shaded)\n{text}", fontsize=9)
-    fig.tight_layout()
+        if n <= 2 or i == n - 1:
+            ax_c.set_xlabel("frequency [Hz]")
+    axes[(0, 0)][0].legend(fontsize=8)
+    fig.suptitle(f"{result.label}: {result.method}, fit band {result.band_hz[0]:g}-"
+                 f"{result.band_hz[1]:g} Hz (shaded)\n"
+                 f"estimate's phase drawn in the band where coherence >= "
+                 f"{PHASE_MIN_COHERENCE:g}", fontsize=10)
+    bottom = (0.25 + 0.22 * len(caption)) / height
+    fig.text(0.5, 0.15 / height, "\n".join(caption), ha="center", va="bottom", fontsize=9,
+             family="monospace")
+    fig.tight_layout(rect=(0, bottom, 1, 1 - 0.6 / height))
     return fig
+
+
+def _parameter_caption(result) -> list[str]:
+    """One line per fitted parameter: ``K = [...] N m/rad`` (I for one joint)."""
+    return [f"{symbol(p, result.n_dof)} = " + _matrix_text(getattr(result.fit, p))
+            + f" {UNITS[p]}" for p in ("K", "B", "M")]
 
 
 def _matrix_text(a) -> str:

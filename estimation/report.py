@@ -3,14 +3,15 @@
 ``make_report(folder, out)`` reads every trial, groups them into conditions by their
 metadata, scores each condition (:func:`estimation.conditions.evaluate`) and writes:
 
-- ``fig2_impedance.png``: true vs estimated Z (magnitude, phase, relative error; 2x2
-  elements) for the four corner conditions (friction, resolution) in {0, 3}^2 at the
+- ``fig2_impedance.png``: true vs estimated Z (magnitude, unwrapped phase, relative error
+  per element; one column per element for 2 joints, an n x n grid of elements for n >= 3)
+  for the corner conditions (friction, resolution) in {0, 3}^2 at the
   highest perturbation level, the recommended variant beside the paper's T/R;
 - ``fig3_accuracy.png``: VAF and R^2 of every element over all conditions (main variant;
   ``fig3_accuracy_{compare}.png`` for the compared one, by default the paper's);
 - ``fig4_coherence.png``: band-mean derived coherence over all conditions (likewise);
 - ``table_conditions.csv`` (every figure, per element) and ``table_conditions.md``
-  (summaries), ``table_parameters.csv``/``.md`` (fitted M, B, K against Table I, mean
+  (summaries), ``table_parameters.csv``/``.md`` (fitted M, B, K against the truth, mean
   and worst case over conditions), ``table_summary.csv``/``.md`` (worst case per variant,
   MIMO baselines included), ``report.json``.
 The report is built in a temporary folder and renamed into place (a failure leaves no
@@ -60,6 +61,36 @@ def _elements(rows) -> list:
 
 #: Truth of a report by name: Table I (reference.md) or reference-3dof.md's arm.
 _TRUTH_ARMS = {"table1": "2dof", "reference-3dof": "3dof"}
+#: How figures and tables name each truth.
+TRUTH_LABELS = {"table1": "Table I", "reference-3dof": "the 3-joint reference (reference-3dof)"}
+
+
+def trial_paths(sources) -> list[Path]:
+    """Trial files of folders, files (``NAME.csv``/``.json``/``.mat``) or stems (``NAME``).
+
+    A stem is taken the way ``trialformat.read_trial`` takes it, so ``armimp figures`` and
+    ``armimp estimate`` accept the same arguments. Raises EstimationError naming the
+    sources when none holds a trial.
+    """
+    paths = []
+    for source in map(Path, sources):
+        if source.is_dir():
+            paths += sorted(source.glob("*.csv")) + sorted(source.glob("*.mat"))
+        elif source.suffix.lower() in (".csv", ".mat") and source.is_file():
+            paths.append(source)
+        elif source.suffix.lower() == ".json" and source.with_suffix(".csv").is_file():
+            paths.append(source.with_suffix(".csv"))
+        else:
+            found = [q for q in (source.with_suffix(".csv"), source.with_suffix(".mat"))
+                     if q.is_file()]
+            if len(found) > 1:
+                raise EstimationError(f"{source}: trial present both as .csv and .mat; "
+                                      f"name one file")
+            paths += found
+    if not paths:
+        raise EstimationError(f"no trial (a folder of NAME.csv or NAME.mat, such a file, or "
+                              f"its stem NAME) in {[str(s) for s in sources]}")
+    return paths
 
 
 def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PAPER,
@@ -99,10 +130,7 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
     out = Path(out)
     arm = ref.arm_matrices(_TRUTH_ARMS[truth]) if truth in _TRUTH_ARMS else None
     folders = [folders] if isinstance(folders, (str, os.PathLike)) else list(folders)
-    paths = [p for folder in folders for p in
-             sorted(Path(folder).glob("*.csv")) + sorted(Path(folder).glob("*.mat"))]
-    if not paths:
-        raise EstimationError(f"no trial (NAME.csv or NAME.mat) in {[str(f) for f in folders]}")
+    paths = trial_paths(folders)
     tasks = _condition_tasks(paths, arm, variants)
     pool = _pool(workers, len(tasks))
     try:
@@ -115,8 +143,10 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
             if res["curves"]:
                 curves[res["condition"]] = res["curves"]
         if not rows:
-            raise EstimationError(f"no condition could be estimated: {skipped}")
-        figures = [("fig2_impedance.png", "fig2", (curves, arm, variants))]
+            reasons = sorted({f"{k['condition']}: {k['reason']}" for k in skipped})
+            raise EstimationError("no condition could be estimated: " + "; ".join(reasons))
+        figures = [("fig2_impedance.png", "fig2",
+                    (curves, arm, variants, TRUTH_LABELS.get(truth)))]
         for name in variants:
             suffix = "" if name == variant else f"_{name}"
             figures += [(f"fig3_accuracy{suffix}.png", "fig3", (rows, name)),
@@ -150,7 +180,8 @@ def _write_report(tmp, rows, skipped, arm, folders, truth, variant, compare, pat
              _atomic_text(tmp / "table_conditions.md", conditions_markdown(rows, arm)),
              *parameter_tables(rows, arm, tmp),
              _write_rows(tmp / "table_summary.csv", summary),
-             _atomic_text(tmp / "table_summary.md", summary_markdown(summary, arm))]
+             _atomic_text(tmp / "table_summary.md", summary_markdown(summary, arm,
+                                                                        TRUTH_LABELS.get(truth)))]
     report = {"folders": [Path(f).name for f in folders], "truth": truth,
               "variant_in_figures": variant, "compared_variant": compare,
               "n_trials": len(paths), "n_conditions": len(groups), "skipped": skipped,
@@ -291,15 +322,22 @@ def summarize(rows) -> list[dict]:
     return out
 
 
-def summary_markdown(summary, arm) -> str:
-    """The worst-case table of :func:`summarize`, as Markdown."""
+def summary_markdown(summary, arm, truth_label="Table I") -> str:
+    """The worst-case table of :func:`summarize`, as Markdown.
+
+    Errors are per element, each relative to that element's own true value (an
+    off-diagonal element is small, so its relative error is large); the targets of
+    ``armimp paper`` normalise off-diagonal errors by sqrt(X_ii X_kk) instead."""
     cols = ["tuning", "variant", "description", "n_conditions", "vaf_min", "r2_min",
             "coh_min"] + (["err_M_max", "err_B_max", "err_K_max"] if arm else [])
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(_fmt(r.get(c)) for c in cols) + " |" for r in summary]
-    legend = ("\nWorst case over the conditions and the four elements: vaf_min [%], r2_min, "
+    legend = ("\nWorst case over the conditions and all elements: vaf_min [%], r2_min, "
               "coh_min (band-mean derived coherence) are minima; err_*_max [%] the largest "
-              "|relative error| of the fitted M, B, K against Table I.\n")
+              f"|relative error| of the fitted M, B, K against {truth_label}, each element "
+              "relative to its own true value (X_ik). The targets block of `armimp paper` "
+              "normalises off-diagonal errors by sqrt(X_ii X_kk) instead, so its numbers "
+              "are smaller for the same estimator.\n")
     return "\n".join(lines) + "\n" + legend
 
 
@@ -314,12 +352,14 @@ def conditions_markdown(rows, arm) -> str:
     for r in rows:
         lines.append("| " + " | ".join(_fmt(r.get(c)) for c in cols) + " |")
     legend = ("\nvaf_min [%], r2_min, coh_min: worst element; err_*_max [%]: largest "
-              "|relative error| of the fitted parameter over the four elements.\n")
+              "|relative error| of the fitted parameter over all elements, each relative to "
+              "its own true value.\n")
     return "\n".join(lines) + "\n" + legend
 
 
 def parameter_tables(rows, arm, out) -> list:
-    """Fitted M, B, K per element and variant: Table I, mean, worst error over conditions."""
+    """Fitted M, B, K per element and variant: the true value (Table I or reference-3dof),
+    mean, worst error over conditions."""
     table = []
     for name, *_ in VARIANTS:
         sel = [r for r in rows if r["variant"] == name]
@@ -333,7 +373,7 @@ def parameter_tables(rows, arm, out) -> list:
                         "fitted_max": vals.max()}
                 if true is not None:
                     errs = np.array([r[f"err_{p}_{e}"] for r in sel])
-                    line.update(table_I=float(true[int(e[0]) - 1, int(e[1]) - 1]),
+                    line.update(true_value=float(true[int(e[0]) - 1, int(e[1]) - 1]),
                                 err_mean_pct=errs.mean(),
                                 err_worst_pct=errs[np.argmax(np.abs(errs))])
                 table.append(line)
@@ -363,22 +403,68 @@ def _corner_label(friction, resolution) -> str:
     return f"friction {friction}, resolution {resolution}"
 
 
-def fig2(curves, arm, variants):
+def unwrapped_phase_deg(z, valid=None) -> np.ndarray:
+    """Phase of ``z`` [deg] unwrapped along frequency, NaN where ``valid`` is False.
+
+    Only the valid points are unwrapped (noise where the phase means nothing cannot add
+    360 deg jumps to the rest), then shifted by a multiple of 360 deg so that the first
+    valid point lies in (-180, 180]. Shape of ``z``; ``valid``: bool array of that shape.
+    """
+    z = np.asarray(z)
+    valid = np.isfinite(z) & (np.abs(z) > 0) if valid is None else valid & np.isfinite(z)
+    out = np.full(z.shape, np.nan)
+    if valid.any():
+        ph = np.unwrap(np.angle(z[valid]))
+        ph -= 2 * np.pi * np.round((ph[0] - np.angle(z[valid][0])) / (2 * np.pi))
+        out[valid] = np.degrees(ph)
+    return out
+
+
+def element_axes(fig, n, quantities):
+    """Axes of a Bode-type figure: ``{(i, k): [axis per quantity]}`` (0-based i, k).
+
+    n <= 2: one column per element, one row per quantity (a 2 x 2 arm: 4 columns). n >= 3:
+    an n x n grid of elements (row i, column k, as in the matrix), each a block of the
+    quantities stacked, so that the figure stays readable when scaled.
+    """
+    q = len(quantities)
+    if n <= 2:
+        axes = fig.subplots(q, n * n, sharex=True, squeeze=False)
+        return {(i, k): list(axes[:, i * n + k]) for i in range(n) for k in range(n)}
+    axes = fig.subplots(q * n, n, sharex=True, squeeze=False)
+    return {(i, k): list(axes[q * i:q * (i + 1), k]) for i in range(n) for k in range(n)}
+
+
+def _fig2_title(corners, arm, truth_label, top):
+    pairs = [(c.friction, c.resolution) for c, _ in corners]
+    if len(pairs) == len(CORNERS):
+        which = "the four corner conditions"
+    elif len(pairs) == 1:
+        which = f"one condition ({_corner_label(*pairs[0])})"
+    else:
+        which = f"{len(pairs)} corner conditions"
+    truth = f" vs {truth_label}" if arm is not None and truth_label else ""
+    return f"Fig. 2: estimated impedance{truth}, {which} at perturbation level {top}"
+
+
+def fig2(curves, arm, variants, truth_label="Table I"):
     """Estimated vs true Z for the corner conditions at the highest perturbation level.
 
     ``curves``: ``{Condition: {variant: (f_band, Z_band)}}`` (see :func:`score_condition`).
-    Columns: the n x n elements. Rows: magnitude, phase and (with a truth) the relative
-    error ``|Zhat - Z| / |Z|`` [%], which separates the variants where the curves overlap.
-    Colour: corner condition (friction, resolution) in {0, 3}^2; line style: variant (the
-    first solid).
+    Per element: magnitude, phase (unwrapped) and, with a truth, the relative error
+    ``|Zhat - Z| / |Z|`` [%], which separates the variants where the curves overlap;
+    elements laid out by :func:`element_axes`. Colour: corner condition (friction,
+    resolution) in {0, 3}^2; line style: variant (the first solid). ``truth_label`` names
+    the truth in the title and legend (Table I, the 3-joint reference).
     """
     corners = sorted(curves.items(), key=lambda cc: (cc[0].friction, cc[0].resolution))
     top = corners[0][0].perturbation if corners else None
     n = next((Z.shape[1] for _, cv in corners for _, Z in cv.values()), 2)
-    elements = element_names(n)
-    n_rows = 3 if arm is not None else 2
-    fig, axes = plt.subplots(n_rows, len(elements), figsize=(4 * len(elements),
-                             3.2 * n_rows + 1.2), sharex=True, squeeze=False)
+    quantities = ("mag", "phase", "err") if arm is not None else ("mag", "phase")
+    q = len(quantities)
+    size = (4 * n * n, 3.2 * q + 1.2) if n <= 2 else (4.4 * n, 2.3 * q * n + 1.6)
+    fig = plt.figure(figsize=size)
+    axes = element_axes(fig, n, quantities)
     f_band = None
     drawn = set()
     for cond, by_variant in corners:
@@ -389,40 +475,42 @@ def fig2(curves, arm, variants):
             f_band, Z = by_variant[name]
             drawn.add((cond.friction, cond.resolution, name))
             Zt = true_impedance(f_band, *arm) if arm is not None else None
-            for j, e in enumerate(elements):
-                z = Z[:, int(e[0]) - 1, int(e[1]) - 1]
-                axes[0, j].loglog(f_band, np.abs(z), style, color=color, lw=1.2)
-                axes[1, j].semilogx(f_band, np.degrees(np.angle(z)), style, color=color,
-                                    lw=1.2)
+            for (i, k), ax in axes.items():
+                z = Z[:, i, k]
+                ax[0].loglog(f_band, np.abs(z), style, color=color, lw=1.2)
+                ax[1].semilogx(f_band, unwrapped_phase_deg(z), style, color=color, lw=1.2)
                 if Zt is not None:
-                    zt = Zt[:, int(e[0]) - 1, int(e[1]) - 1]
-                    axes[2, j].loglog(f_band, 100 * np.abs(z - zt) / np.abs(zt), style,
-                                      color=color, lw=1.2)
+                    zt = Zt[:, i, k]
+                    ax[2].loglog(f_band, 100 * np.abs(z - zt) / np.abs(zt), style,
+                                 color=color, lw=1.2)
     if arm is not None and f_band is not None:
         zt = true_impedance(f_band, *arm)
-        for j, e in enumerate(elements):
-            z = zt[:, int(e[0]) - 1, int(e[1]) - 1]
-            axes[0, j].loglog(f_band, np.abs(z), **TRUTH_STYLE)
-            axes[1, j].semilogx(f_band, np.degrees(np.angle(z)), **TRUTH_STYLE)
-    for j, e in enumerate(elements):
-        axes[0, j].set_title(f"Z{e}")
-        axes[-1, j].set_xlabel("frequency [Hz]")
-        axes[0, j].set_ylabel(f"|Z{e}| [N m/rad]")
-        axes[1, j].set_ylabel(f"phase of Z{e} [deg]")
+        for (i, k), ax in axes.items():
+            ax[0].loglog(f_band, np.abs(zt[:, i, k]), **TRUTH_STYLE)
+            ax[1].semilogx(f_band, unwrapped_phase_deg(zt[:, i, k]), **TRUTH_STYLE)
+    for (i, k), ax in axes.items():
+        e = f"Z{i + 1}{k + 1}"
+        ax[0].set_title(e, fontsize=10)
+        ax[0].set_ylabel(f"|{e}| [N m/rad]")
+        ax[1].set_ylabel("phase [deg]")
         if arm is not None:
-            axes[2, j].set_ylabel("|Zhat - Z| / |Z| [%]")
-        for ax in axes[:, j]:
-            ax.grid(True, which="both", alpha=0.3)
-    fig.legend(handles=_fig2_legend([(c, None) for c, _ in corners], variants, arm, drawn),
-               loc="lower center", ncol=4, fontsize=9, frameon=False)
-    truth = " vs Table I" if arm is not None else ""
-    fig.suptitle(f"Fig. 2: estimated impedance{truth}, four corner conditions at perturbation "
-                 f"level {top}", fontsize=12)
-    fig.tight_layout(rect=(0, 0.06, 1, 1))
+            ax[2].set_ylabel("error [%]")
+        if n <= 2 or i == n - 1:
+            ax[-1].set_xlabel("frequency [Hz]")
+        for a in ax:
+            a.grid(True, which="both", alpha=0.3)
+    legend = _fig2_legend([(c, None) for c, _ in corners], variants, arm, drawn,
+                          truth_label)
+    fig.legend(handles=legend, loc="lower center", ncol=min(len(legend), 4 if n <= 2 else 3),
+               fontsize=9, frameon=False)
+    fig.suptitle(_fig2_title(corners, arm, truth_label, top)
+                 + ("\nerror: |Zhat - Z| / |Z| [%]" if arm is not None else ""), fontsize=12)
+    bottom = (0.06 if n <= 2 else 0.05)
+    fig.tight_layout(rect=(0, bottom, 1, 1 - (0.0 if n <= 2 else 0.01)))
     return fig
 
 
-def _fig2_legend(corners, variants, arm, drawn):
+def _fig2_legend(corners, variants, arm, drawn, truth_label="Table I"):
     from matplotlib.lines import Line2D
 
     handles = [Line2D([], [], color=CORNER_COLORS[CORNERS.index((c.friction, c.resolution))],
@@ -432,7 +520,7 @@ def _fig2_legend(corners, variants, arm, drawn):
                        + ("" if any(d[2] == name for d in drawn) else " (no trials)"))
                 for style, name in zip(VARIANT_STYLES, variants)]
     if arm is not None:
-        handles.append(Line2D([], [], **TRUTH_STYLE, label="Table I (true impedance)"))
+        handles.append(Line2D([], [], **TRUTH_STYLE, label=f"true impedance: {truth_label or 'truth'}"))
     return handles
 
 
@@ -458,7 +546,7 @@ def fig3(rows, variant):
     panels = (("vaf", "VAF [%]", "VAF, perturbation level {level}"),
               ("r2", "R² [-]", "R², perturbation level {level}"))
     return _level_figure(rows, variant, panels, width=13,
-                         title="Fig. 3: accuracy per condition")
+                         title="Fig. 3: VAF and R² of each element per condition")
 
 
 def fig4(rows, variant):
@@ -466,7 +554,8 @@ def fig4(rows, variant):
     panels = (("coh", "mean coherence [-]",
                "derived coherence, band mean 0-15 Hz, perturbation level {level}"),)
     return _level_figure(rows, variant, panels, width=9,
-                         title="Fig. 4: reliability per condition")
+                         title="Fig. 4: band-mean derived coherence of each element per "
+                               "condition")
 
 
 def _level_figure(rows, variant, panels, *, width, title):
@@ -484,7 +573,9 @@ def _level_figure(rows, variant, panels, *, width, title):
             ax.set_title(panel_title.format(level=level), fontsize=10)
     if levels:
         axes[0, 0].legend(fontsize=8, ncol=4)
-    fig.suptitle(f"{title}, {variant} [{VARIANT_LABELS.get(variant, '')}]", fontsize=12)
+    count = len({(r["friction"], r["resolution"], r["perturbation"]) for r in sel})
+    fig.suptitle(f"{title} ({count} condition{'s' if count != 1 else ''}), {variant} "
+                 f"[{VARIANT_LABELS.get(variant, '')}]", fontsize=12)
     fig.tight_layout()
     return fig
 

@@ -153,9 +153,10 @@ def _add_paper(sub):
         "paper", help="the paper's study end to end: grid + all-joints trials + report",
         description="Simulate the decomposition grid (96 trials) and the all-joints trials "
                     "(48) into OUT/trials (resumable), then write the estimation report "
-                    "(Figs. 2-4, tables against Table I) into OUT/report and print the "
-                    "worst cases. --quick: the four corner conditions at perturbation "
-                    "level 3 with 20 s trials (12 trials, about a minute).")
+                    "(Figs. 2-4, tables against Table I, or reference-3dof with --arm "
+                    "3dof) into OUT/report and print the worst cases. --quick: the four "
+                    "corner conditions at perturbation level 3 with 20 s trials (12 "
+                    "trials, 16 with --arm 3dof; 15-25 s).")
     p.add_argument("--out", required=True, help="run folder (re-running resumes)")
     p.add_argument("--tuning", default="reference", choices=("reference", "robust"))
     p.add_argument("--duration", type=float, default=None,

@@ -57,6 +57,11 @@ def test_report_files_and_tables(grid_folder, tmp_path, capsys):
     best = [r for r in rows if r["variant"] == "full"]
     assert all(float(r["vaf_min"]) > 99.9 for r in best), [r["vaf_min"] for r in best]
     assert "| friction |" in (tmp_path / "table_conditions.md").read_text()
+    legend = (tmp_path / "table_summary.md").read_text()
+    assert "against Table I, each element relative to its own true value" in legend
+    assert "sqrt(X_ii X_kk)" in legend  # the other normalisation, named
+    params = list(csv.DictReader(open(tmp_path / "table_parameters.csv")))
+    assert float(params[0]["true_value"]) > 0
 
 
 def test_cli_estimate_writes_json(grid_folder, tmp_path, capsys):

@@ -99,3 +99,23 @@ def test_paper_failed_trial_reported_rest_completes(reference_fmu, tmp_path, joi
     assert "closed_loop_corrected" in variants and "decomposition" not in variants
     text = "\n".join(orchestrator.paper.summary_lines(result))
     assert "FAILED fric3_res3_pert3_dof2" in text and "not estimated" in text
+
+
+def test_summary_names_the_truth_and_each_block_normalisation():
+    row = {"tuning": "reference", "variant": "full_corrected", "vaf_min": 99.0,
+           "r2_min": 0.99, "err_M_max": 2.9, "err_B_max": 7.6, "err_K_max": 3.8,
+           "n_conditions": 4}
+    acc = {"tuning": "reference", "variant": "full_corrected", "vaf_min": 99.0,
+           "err_M_max": 1.0, "err_B_max": 1.2, "err_K_max": 0.4, "meets": False,
+           "worst": {}}
+    result = {"grid": {"n_trials": 16, "n_done": 16, "n_skipped": 0, "n_failed": 0,
+                       "failures": []},
+              "wall_s": {"grid": 1.0, "report": 1.0, "total": 2.0},
+              "skipped_conditions": [], "summary": [row], "acceptance": [acc],
+              "report_dir": "report", "options": {"arm": "3dof"}}
+    text = "\n".join(orchestrator.paper.summary_lines(result))
+    assert "Table I" not in text and text.count("reference-3dof") == 2
+    assert "relative to its own true value X_ik" in text
+    assert "relative to sqrt(X_ii X_kk)" in text
+    result["options"]["arm"] = "2dof"
+    assert "vs Table I" in "\n".join(orchestrator.paper.summary_lines(result))
