@@ -53,7 +53,8 @@ class Parameter:
         Measured detectability floor (bench/bench_diagnosis.py --calibrate, 2 trials of
         12 s, perturbation level 3): weaker values give a nominal gap below the
         significance threshold, so a validation set drawn there is reported but not
-        counted as a miss. None: detectable over the whole realistic range.
+        counted as a miss, and a pair's second effect fitted there is not named
+        (core._pair_earns_second). None: no floor measured inside the search range.
     """
 
     name: str
@@ -162,7 +163,7 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
            fit="integer",
            always_robust=True),
     Effect("actuator_lag", "first-order lag between command and applied torque",
-           (_p("time_constant_s", "s", (1.5e-3, 6e-3), (2e-4, 2e-2)),),
+           (_p("time_constant_s", "s", (1.5e-3, 6e-3), (2e-4, 2e-2), detectable_from=5e-4),),
            robust_above={"time_constant_s": 1e-3}),
     Effect("transmission_compliance",
            "spring-damper between motor and link; encoder on the motor side",
@@ -170,9 +171,10 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
     Effect("interface_compliance", "compliant cuff between robot link and arm",
            (_p("k_s", "N m/rad", (100.0, 600.0), (20.0, 3000.0)),)),
     Effect("gravity", "robot plane tilted from horizontal; gravity on the robot links",
-           (_p("tilt_deg", "deg", (2.0, 10.0), (0.2, 30.0)),)),
+           (_p("tilt_deg", "deg", (2.0, 10.0), (0.2, 30.0), detectable_from=1.2),)),
     Effect("inertia_mismatch", "the robot's a1, a2, a3 scaled by s",
-           (_p("scale", "-", (1.1, 1.3), (0.5, 2.0), log=False, off=1.0),),
+           (_p("scale", "-", (1.1, 1.3), (0.5, 2.0), log=False, off=1.0,
+               detectable_from=1.07),),
            sign_choice=True),
     Effect("torque_sensor_lag", "first-order low-pass of the torque sensor",
            (_p("time_constant_s", "s", (5e-4, 4e-3), (5e-5, 2e-2), detectable_from=6e-4),)),

@@ -921,9 +921,13 @@ def _pair_earns_second(pair: EffectFit, single: EffectFit, cfg: DiagnosisConfig)
     """True when adding the pair's second effect shrinks the gap significantly: below
     ``pair_gain`` times the single's gap on the calibration units AND on the held-out
     units, and on the held-out units by more than the significance threshold (what
-    nominal-vs-nominal noise can do). A second effect that only fits the calibration
-    units is absorbing noise or model error, not measuring an effect."""
+    nominal-vs-nominal noise can do), with the second effect fitted above its measured
+    detectability floor (catalogue.below_detectability). A second effect that only fits
+    the calibration units, or at a strength no data set shows, is absorbing noise or model
+    error, not measuring an effect."""
+    second = pair.effects[-1]
     held_drop = single.held_out_gap - pair.held_out_gap
     return bool(pair.calibration_gap < cfg.pair_gain * single.calibration_gap
                 and pair.held_out_gap < cfg.pair_gain * single.held_out_gap
-                and held_drop > cfg.significance_gap)
+                and held_drop > cfg.significance_gap
+                and not cat.below_detectability(second, pair.params[second]))

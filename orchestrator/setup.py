@@ -177,11 +177,13 @@ class Setup:
         return ControllerConfig.from_metadata(self.controller, Ts=self.Ts)
 
     def to_metadata(self) -> dict:
-        """The declared set-up as log-format.md metadata keys (no trial-specific keys)."""
+        """The declared set-up as log-format.md metadata keys (no trial-specific keys).
+        The sampler reads tau_h before each sample's command acts: ``sensors`` declares
+        ``torque_sampling = "left_limit"`` (log-format.md, "Conventions a lab states")."""
         return {"format": FORMAT, "fs": self.fs, "n_dof": self.n_dof,
                 "posture_deg": list(self.posture_deg),
                 "controller": copy.deepcopy(self.controller),
-                "sensors": copy.deepcopy(self.sensors),
+                "sensors": dict(copy.deepcopy(self.sensors), torque_sampling="left_limit"),
                 "robot": copy.deepcopy(self.robot),
                 "friction": copy.deepcopy(self.friction)}
 

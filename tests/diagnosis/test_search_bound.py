@@ -105,3 +105,16 @@ def test_a_fit_beyond_a_bound_or_at_zero_is_flagged():
     assert at_search_bound("friction", {"Fc": 0.0201}) != []
     assert math.isinf(_fit({"gravity": {"tilt_deg": 5.0}}, math.inf, 1.0).calibration_gap)
     assert not _fit({"gravity": {"tilt_deg": 5.0}}, math.inf, 1.0).nameable
+
+
+def test_a_second_effect_fitted_below_its_detectability_floor_is_not_named():
+    """transmission_compliance-2 of the issue-8 validation: the pair added inertia_mismatch
+    at scale 1.0085, far below its floor (|s - 1| ~ 0.07); the single is named alone."""
+    single = _fit({"transmission_compliance": {"k_t": 300.0}}, 8.0, 6.0)
+    weak = _fit({"transmission_compliance": {"k_t": 300.0},
+                 "inertia_mismatch": {"scale": 1.0085}}, 2.0, 1.0)
+    strong = _fit({"transmission_compliance": {"k_t": 300.0},
+                   "inertia_mismatch": {"scale": 1.2}}, 2.0, 1.0)
+    assert _verdict(True, [single], [weak], 400.0, CFG)[1] == ["transmission_compliance"]
+    assert _verdict(True, [single], [strong], 400.0, CFG)[1] == ["transmission_compliance",
+                                                                 "inertia_mismatch"]

@@ -177,7 +177,9 @@ def test_sensor_noise_seeded_and_quantisation_effect(reference_plant):
     r = np.radians(0.01)
     np.testing.assert_allclose(a.theta / r, np.round(a.theta / r), atol=1e-9)
     np.testing.assert_allclose(a.tau_h / 0.05, np.round(a.tau_h / 0.05), atol=1e-9)
-    assert a.meta["sensors"] == reference.sensor_level(0)  # declared stays ideal
+    declared = dict(a.meta["sensors"])
+    assert declared.pop("torque_sampling") == "left_limit"  # the sampler's convention
+    assert declared == reference.sensor_level(0)  # declared stays ideal
     assert a.meta["simulation"]["noise_seed"] == [4, 1]
 
 
@@ -201,7 +203,7 @@ def test_trial_metadata_and_round_trip(reference_plant, tmp_path):
     assert meta["perturbation"] == {"level": 2, "peak": [6.0, 3.6], "seed": 12,
                                     "cutoff_hz": 15.0, "order": 8}
     assert meta["friction"] == reference.friction_level(2)
-    assert meta["sensors"] == reference.sensor_level(1)
+    assert meta["sensors"] == dict(reference.sensor_level(1), torque_sampling="left_limit")
     assert meta["controller"]["tuning"] == "reference"
     sim = meta["simulation"]
     assert sim["arm"]["K_h"] == K_H.tolist() and sim["arm"]["M_h"] == M_H.tolist()
