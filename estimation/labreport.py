@@ -33,7 +33,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from trialformat import atomic_write  # noqa: E402
-from trialformat.logs import current_umask  # noqa: E402
+from trialformat.logs import current_umask, replace_dir  # noqa: E402
 
 from .lab import FRF_UNITS, UNITS, element_indices, result_rows  # noqa: E402
 
@@ -61,22 +61,11 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
         doc = {"options": options or {}, "results": [r.to_json() for r in results]}
         names.append(_text(tmp / "results.json", json.dumps(doc, indent=1)))
         os.chmod(tmp, 0o777 & ~current_umask())
-        _replace_dir(tmp, out)
+        replace_dir(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return [str(out / Path(n).name) for n in names]
-
-
-def _replace_dir(tmp: Path, out: Path) -> None:
-    if out.exists():
-        old = out.with_name(f".{out.name}.old")
-        shutil.rmtree(old, ignore_errors=True)
-        os.replace(out, old)
-        os.replace(tmp, out)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.replace(tmp, out)
 
 
 def write_frf(result, stem: Path) -> list[Path]:

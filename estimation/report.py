@@ -40,7 +40,7 @@ from tqdm import tqdm  # noqa: E402
 
 import trialformat as tf  # noqa: E402
 from trialformat import reference as ref  # noqa: E402
-from trialformat.logs import current_umask  # noqa: E402
+from trialformat.logs import current_umask, replace_dir  # noqa: E402
 
 from .accuracy import true_impedance  # noqa: E402
 from .conditions import (PAPER, RECOMMENDED, VARIANT_LABELS, VARIANTS, condition_of,  # noqa: E402
@@ -161,7 +161,7 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
             for (name, *_), png in zip(figures, pngs):
                 files.append(_atomic_bytes(tmp / name, png.result() if pool else png))
             os.chmod(tmp, 0o777 & ~current_umask())
-            _replace_dir(tmp, out)
+            replace_dir(tmp, out)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
@@ -285,17 +285,6 @@ def score_condition(task) -> dict:
         except EstimationError:  # trials of that kind missing: nothing to draw
             continue
     return {"condition": cond, "rows": rows, "skipped": skipped, "curves": curves}
-
-
-def _replace_dir(tmp: Path, out: Path) -> None:
-    if out.exists():
-        old = out.with_name(f".{out.name}.old")
-        shutil.rmtree(old, ignore_errors=True)
-        os.replace(out, old)
-        os.replace(tmp, out)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.replace(tmp, out)
 
 
 def summarize(rows) -> list[dict]:
