@@ -48,6 +48,7 @@ def test_info_prints_contract_and_parameters(reference_fmu, tmp_path, capsys):
     assert main(["info", str(reference_fmu)]) == 0
     out = capsys.readouterr().out
     assert "contract: OK, 2 joints" in out and "friction.Fc[1] = 0.0" in out
+    assert "FMI 2.0 Co-Simulation" in out
     assert main(["info", str(reference_fmu), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["n_dof"] == 2
     fake = tmp_path / "fake.fmu"
