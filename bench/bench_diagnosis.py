@@ -240,7 +240,8 @@ def main(argv=None) -> int:
         result = run_validation(specs, work, progress=True, workers=args.workers,
                                 scheduler=args.scheduler)
     out = {"summary": result["summary"], "rows": result["rows"],
-           "settings": vars(args), "n_sets_drawn": len(specs),
+           "settings": dict(vars(args), work=Path(args.work).name),  # no machine path
+           "n_sets_drawn": len(specs),
            "n_sets_done": len(result["rows"]), "elapsed_s": time.perf_counter() - t0}
     if args.timing:
         out["timing_8_trials"] = timing_run(work, args.repeat, args.workers)
