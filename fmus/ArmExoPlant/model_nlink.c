@@ -361,6 +361,31 @@ static inline double friction(const ModelData *d, int j, double v, double z, dou
     }
 }
 
+/* f -= Coriolis/centrifugal and gravity torques (shared by evaluate() and the fast path):
+ * c_j = sum_{a >= j} sum_b d_ab sin(phi_a - phi_b) phi_b'^2 */
+__attribute__((always_inline)) static inline void
+subtract_coriolis_gravity(const ModelData *d, double S[NJ][NJ], const double *w,
+                          const double *th, double *f) {
+    int a, b, j;
+    {
+        double pd2[NJ], acc = 0.0, qc[NJ];
+        for (b = 0; b < NJ; b++) { acc += w[b]; pd2[b] = acc * acc; }
+        for (a = 0; a < NJ; a++) {
+            double q = 0.0;
+            for (b = 0; b < a; b++) q += d->d[a][b] * S[b][a] * pd2[b];
+            for (b = a + 1; b < NJ; b++) q -= d->d[a][b] * S[a][b] * pd2[b];
+            qc[a] = q;
+        }
+        acc = 0.0;
+        for (j = NJ - 1; j >= 0; j--) { acc += qc[j]; f[j] -= acc; }
+    }
+    if (d->has_gravity) {
+        double phi = 0.0, acc = 0.0, qg[NJ];
+        for (a = 0; a < NJ; a++) { phi += d->q0[a] + th[a]; qg[a] = d->gq[a] * cos(phi); }
+        for (j = NJ - 1; j >= 0; j--) { acc += qg[j]; f[j] -= acc; }
+    }
+}
+
 __attribute__((always_inline)) static inline void
 evaluate(const ModelData *d, const double *x, double *dx, Aux *aux) {
     const double *th = x + d->i_th, *w = x + d->i_w;
@@ -403,24 +428,7 @@ evaluate(const ModelData *d, const double *x, double *dx, Aux *aux) {
         }
     }
 
-    /* Coriolis/centrifugal: c_j = sum_{a >= j} sum_b d_ab sin(phi_a - phi_b) phi_b'^2 */
-    {
-        double pd2[NJ], acc = 0.0, qc[NJ];
-        for (b = 0; b < NJ; b++) { acc += w[b]; pd2[b] = acc * acc; }
-        for (a = 0; a < NJ; a++) {
-            double q = 0.0;
-            for (b = 0; b < a; b++) q += d->d[a][b] * S[b][a] * pd2[b];
-            for (b = a + 1; b < NJ; b++) q -= d->d[a][b] * S[a][b] * pd2[b];
-            qc[a] = q;
-        }
-        acc = 0.0;
-        for (j = NJ - 1; j >= 0; j--) { acc += qc[j]; f[j] -= acc; }
-    }
-    if (d->has_gravity) {
-        double phi = 0.0, acc = 0.0, qg[NJ];
-        for (a = 0; a < NJ; a++) { phi += d->q0[a] + th[a]; qg[a] = d->gq[a] * cos(phi); }
-        for (j = NJ - 1; j >= 0; j--) { acc += qg[j]; f[j] -= acc; }
-    }
+    subtract_coriolis_gravity(d, S, w, th, f);
 
     robot_mass(d, C, A);
     for (j = 0; j < NJ; j++) A[j][j] += d->Jlink[j];
@@ -554,23 +562,7 @@ __attribute__((always_inline)) static inline void deriv_basic(const ModelData *d
         else dx[2 * NJ + j] = 0.0;
         for (k = 0; k < NJ; k++) f[j] -= d->Bh[j][k] * w[k] + d->Kh[j][k] * th[k];
     }
-    {
-        double pd2[NJ], acc = 0.0, qc[NJ];
-        for (b = 0; b < NJ; b++) { acc += w[b]; pd2[b] = acc * acc; }
-        for (a = 0; a < NJ; a++) {
-            double q = 0.0;
-            for (b = 0; b < a; b++) q += d->d[a][b] * S[b][a] * pd2[b];
-            for (b = a + 1; b < NJ; b++) q -= d->d[a][b] * S[a][b] * pd2[b];
-            qc[a] = q;
-        }
-        acc = 0.0;
-        for (j = NJ - 1; j >= 0; j--) { acc += qc[j]; f[j] -= acc; }
-    }
-    if (d->has_gravity) {
-        double phi = 0.0, acc = 0.0, qg[NJ];
-        for (a = 0; a < NJ; a++) { phi += d->q0[a] + th[a]; qg[a] = d->gq[a] * cos(phi); }
-        for (j = NJ - 1; j >= 0; j--) { acc += qg[j]; f[j] -= acc; }
-    }
+    subtract_coriolis_gravity(d, S, w, th, f);
     robot_mass(d, C, A);
     for (j = 0; j < NJ; j++)
         for (k = 0; k < NJ; k++) A[j][k] += d->Ac[j][k];
