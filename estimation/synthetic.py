@@ -181,14 +181,10 @@ def synthetic_condition(**kwargs):
 
 
 #: Human arm of docs/spec/reference-3dof.md (shoulder, elbow, wrist): (M_h, B_h, K_h).
-ARM_3DOF = (np.array([[0.187, 0.084, 0.012], [0.079, 0.060, 0.010], [0.012, 0.010, 0.006]]),
-            np.array([[0.651, 0.239, 0.020], [0.236, 0.407, 0.030], [0.020, 0.030, 0.060]]),
-            np.array([[7.967, 3.187, 0.300], [1.663, 6.901, 0.600], [0.300, 0.600, 3.000]]))
+ARM_3DOF = ref.arm_matrices("3dof")
 #: Controller of reference-3dof.md, reference tuning, and its level-3 peaks [N m].
-CONTROLLER_3DOF = {"M_rd": [0.2, 0.05, 0.02], "B_rd": [1.0, 0.5, 0.2], "K_rd": [10.0, 5.0, 2.0],
-                   "theta_rd_deg": [0.0, 0.0, 0.0], "Mbar": [0.10, 0.03, 0.004],
-                   "wn": [150.0, 150.0, 150.0], "tuning": "reference-3dof"}
-PEAK_3DOF = [9.0, 5.4, 1.8]
+CONTROLLER_3DOF = dict(ref.controller("reference", arm="3dof"), tuning="reference-3dof")
+PEAK_3DOF = ref.perturbation_peak(3, arm="3dof")
 
 
 def _shaped_noise(rng, f, n, rms, corner, order):
