@@ -1,6 +1,6 @@
 """Reading the measured trials of a diagnosis, blind to any truth.
 
-Only ``NAME.csv`` with its ``NAME.json`` (or ``NAME.mat``, estimation.matlab) are read;
+Only ``NAME.csv`` with its ``NAME.json`` (or ``NAME.mat``, trialformat.matlab) are read;
 files whose stem ends in ``.truth`` are never opened, and the ``simulation`` key a simulator may leave in the metadata is
 dropped on reading, so no code after this point can see what was really simulated.
 """

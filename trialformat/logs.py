@@ -218,9 +218,6 @@ def current_umask() -> int:
     return mask
 
 
-_atomic_write = atomic_write  # old private name, kept for callers
-
-
 def trial_exists(stem: str | os.PathLike) -> bool:
     """True when both files of a completely written trial are present."""
     stem = Path(stem)
