@@ -75,41 +75,20 @@ def _replace(trial, scale=None, offset=None, **arrays):
     return out
 
 
-def reader_applies_conventions() -> bool:
-    """True when the trial reader itself returns declared conventions converted (the
-    readers of log-format.md "Lab data": trialformat.finish_trial); they must then not be
-    applied twice."""
-    import trialformat.logs as logs
-    return hasattr(logs, "finish_trial")
-
-
 def apply_declared(trials) -> tuple[list, list]:
-    """Apply the conventions the metadata declare; returns (trials, findings)."""
-    out, findings = [], []
-    if reader_applies_conventions():
-        for t in trials:
-            if str(t.meta.get("angles", "")).lower() == "absolute":
-                findings.append(Finding("declared: angles absolute", t.name,
-                                        "posture subtracted by the reader"))
-            if (t.meta.get("sensors") or {}).get("torque_sign", 1) == -1:
-                findings.append(Finding("declared: torque_sign -1", t.name,
-                                        "tau_h negated by the reader"))
-        return list(trials), findings
+    """Findings for the conventions the metadata declare; returns (trials, findings).
+
+    The trial reader (trialformat.finish_trial) already returns declared conventions
+    converted, so the trials are returned as they are: never converted twice."""
+    findings = []
     for t in trials:
-        changes = {}
         if str(t.meta.get("angles", "")).lower() == "absolute":
-            posture = np.radians(np.asarray(t.meta["posture_deg"], dtype=float))
-            changes["theta"] = t.theta - posture[None, :]
-            changes["offset"] = {"theta": posture}
             findings.append(Finding("declared: angles absolute", t.name,
-                                    "posture subtracted from theta"))
-        sign = (t.meta.get("sensors") or {}).get("torque_sign", 1)
-        if sign == -1:
-            changes["tau_h"] = -t.tau_h
-            changes["scale"] = {"tau_h": -1.0}
-            findings.append(Finding("declared: torque_sign -1", t.name, "tau_h negated"))
-        out.append(_replace(t, **changes) if changes else t)
-    return out, findings
+                                    "posture subtracted by the reader"))
+        if (t.meta.get("sensors") or {}).get("torque_sign", 1) == -1:
+            findings.append(Finding("declared: torque_sign -1", t.name,
+                                    "tau_h negated by the reader"))
+    return list(trials), findings
 
 
 def check_angles(trials) -> tuple[list, list]:
