@@ -3,10 +3,11 @@
  * (fmi2.c, fmi3.c) map their entry points onto these functions.
  *
  * Time: the FMU lives on its own grid startTime + n * h (h = rk4_step).  An
- * importer's communication point and step end are mapped onto that grid; they
- * must lie within what rounding of the importer's clock explains (see
- * clockTolerance), so importers that add up time (t += H) are accepted as well as
- * those that compute t0 + k * H.
+ * importer's communication point and step end are mapped onto that grid.  A
+ * contiguous step (tc equal to the previous tc + H, as FMI 2.0 section 4.2.2
+ * defines the master's clock) is accepted whatever the drift of an added-up clock
+ * (t += H): its point is the FMU's current grid point.  Another point must lie
+ * within what rounding of the importer's clock explains (see clockTolerance).
  */
 #include <float.h>
 #include <math.h>
@@ -196,6 +197,7 @@ static int core_exitInitialization(ModelInstance *comp) {
     comp->s.nSteps = 0;
     comp->s.nCalls = 0;
     comp->s.time = comp->s.startTime;
+    comp->s.clock = comp->s.startTime;
     comp->s.valuesDirty = 1;
     comp->s.state = StepComplete;
     return CORE_OK;
@@ -213,8 +215,21 @@ static double clockTolerance(const Snapshot *s, double t) {
     return fmin((double)(s->nCalls + 16) * DBL_EPSILON * scale, 0.25 * s->h);
 }
 
-/* One communication step from tc over H: mapped onto the grid, a step that ends on the
- * grid point where it starts (a residual shorter than rounding) is a no-op. */
+/* Largest rounding error of a step size H computed by an importer near time t [s] (as
+ * a difference of two clock values, e.g. stop - t): a few roundings of t and H. */
+static double stepTolerance(double t, double H) {
+    return 16.0 * DBL_EPSILON * fmax(1.0, fmax(fabs(t), fabs(H)));
+}
+
+/* One communication step from tc over H, mapped onto the grid.
+ *
+ * The point: a contiguous step (tc == the importer's clock after the previous step,
+ * bit for bit) starts at the FMU's current grid point, whatever the drift of an
+ * added-up clock; another point must lie within clockTolerance of it.
+ * The end: the step covers round(H / h) RK4 steps when H is a whole multiple of h (up
+ * to the rounding of H); otherwise its end tc + H must lie on the grid (up to the
+ * rounding of the clock: a step cut to the stop time, stop - t, or a residual step of
+ * an added-up clock).  A step that ends on the grid point where it starts is a no-op. */
 static int core_doStep(ModelInstance *comp, const char *f, double tc, double H) {
     Snapshot *s = &comp->s;
     const double h = s->h;
@@ -225,28 +240,42 @@ static int core_doStep(ModelInstance *comp, const char *f, double tc, double H) 
     }
     const double tEnd = tc + H;
     const double tol = clockTolerance(s, tEnd);
-    if (fabs(tc - s->time) > tol) {
+    const int contiguous = (tc == s->clock);
+    if (!contiguous && fabs(tc - s->time) > tol) {
         logError(comp, "%s: expected communication point %.15g but got %.15g (off by %.3g s; "
-                 "rounding of the importer's clock explains at most %.3g s here)",
-                 f, s->time, tc, tc - s->time, tol);
+                 "rounding of the importer's clock explains at most %.3g s here, and the point "
+                 "is not the end %.15g of the previous step)",
+                 f, s->time, tc, tc - s->time, tol, s->clock);
         return CORE_ERROR;
     }
+    const double ratio = H / h;
     const double steps = (tEnd - s->startTime) / h;
-    if (!(steps < 9.0e15)) {
+    if (!(ratio < 9.0e15) || !(steps < 9.0e15)) {
         logError(comp, "%s: the step to t = %.15g s needs more than 9e15 steps of rk4_step = %.15g s",
                  f, tEnd, h);
         return CORE_ERROR;
     }
+    /* the step as a span from the current grid point */
+    const long long nSpan = llround(ratio);
+    const double spanOff = H - (double)nSpan * h;
+    /* the step's end as a point of the importer's clock */
     const long long nEnd = llround(steps);
-    const double gridEnd = s->startTime + (double)nEnd * h;
-    if (nEnd < s->nSteps || fabs(tEnd - gridEnd) > tol) {
-        logError(comp, "%s: communication step size %.15g is not a whole multiple of rk4_step = %.15g "
-                 "(ratio %.15g): the step would end at t = %.15g s, %.3g s from the nearest point of "
-                 "the FMU's time grid startTime + n rk4_step", f, H, h, H / h, tEnd, tEnd - gridEnd);
+    const double endOff = tEnd - (s->startTime + (double)nEnd * h);
+    long long n;
+    if (nSpan > 0 && fabs(spanOff) <= stepTolerance(tc, H)) {
+        n = nSpan;
+    } else if (nEnd >= s->nSteps && fabs(endOff) <= tol) {
+        n = nEnd - s->nSteps;
+    } else {
+        logError(comp, "%s: communication step size %.15g s (%.15g rk4_step) is not a whole multiple "
+                 "of rk4_step = %.15g s (off by %.3g s), and the step would end at t = %.15g s, "
+                 "%.3g s from the nearest point t = %.15g s of the FMU's time grid startTime + n "
+                 "rk4_step (rounding of the importer's clock explains at most %.3g s here)",
+                 f, H, ratio, h, spanOff, tEnd, endOff, tEnd - endOff, tol);
         return CORE_ERROR;
     }
     s->nCalls++;
-    const long long n = nEnd - s->nSteps;
+    s->clock = tEnd;
     if (n == 0) return CORE_OK;
     model_latchInputs(s);
     int bad = model_advance(s, n);

@@ -38,6 +38,7 @@ typedef struct {
     long long nSteps;      /* internal RK4 steps since startTime */
     long long nCalls;      /* doStep calls since initialisation (bounds an importer's clock error) */
     double time;           /* = startTime + nSteps * h, never accumulated */
+    double clock;          /* the importer's clock: tc + H of the last accepted doStep */
     double h;              /* internal step (rk4_step), fixed at initialisation */
     int valuesDirty;       /* outputs must be recomputed before fmi2GetReal */
     double r[N_VR];        /* every real variable, indexed by value reference */

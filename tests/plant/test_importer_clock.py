@@ -86,6 +86,61 @@ def test_accumulating_clock_over_50_s_gives_the_exact_clock_trajectory(make_slav
     assert slave.getRealStatus(2) == 5_000_000 * 1e-5
 
 
+@pytest.mark.parametrize("t0, h_comm, n", [
+    (1e6, 1e-3, 60_000),   # refused after 52.6 s before (OMSimulator --startTime=1e6); leads 2.8 us
+    (1e6, 1e-4, 100_000),  # lags 5.3 us (more than rk4_step / 2): ends with a residual step
+])
+def test_added_up_clock_is_accepted_whatever_its_drift(make_slave, t0, h_comm, n):
+    """Issue 16: a contiguous step (tc == previous tc + H, FMI 2.0 section 4.2.2) is accepted
+    for as long as a run goes, although the added-up clock drifts beyond rk4_step / 4 from
+    the FMU's grid; the trajectory equals the exact clock's (t0 + k H), bit for bit."""
+    global H
+    saved, H = H, h_comm
+    try:
+        t = t0
+        for _ in range(n):
+            t += h_comm
+        drift = t - (t0 + n * h_comm)
+        assert abs(drift) > 0.25e-5, drift  # the drift the old cap refused
+        u = [tuple(r) for r in _multisine(n).tolist()]
+        exact, _ = _drive(_start(make_slave, start_time=t0)[0], u, "exact", t0=t0)
+        slave, _ = _start(make_slave, start_time=t0)
+        added, clock = _drive(slave, u, "add", t0=t0)
+    finally:
+        H = saved
+    np.testing.assert_array_equal(added[:n], exact)
+    np.testing.assert_array_equal(added[-1], exact[-1])  # a residual step changed nothing
+    assert len(added) == n + (drift < 0)                 # lagging: one residual step more
+    assert slave.getRealStatus(2) == t0 + round(n * h_comm / 1e-5) * 1e-5
+
+
+@pytest.mark.slow
+def test_added_up_clock_from_0_over_20000_s_equals_one_long_step(make_slave):
+    """t += 1 ms from 0 over 20 000 s (refused at 14 523 s before; drift 3.6 us): the state
+    equals one doStep of 20 000 s (the same 2e9 RK4 steps)."""
+    u = (0.3, -0.2)
+    slave, _ = _start(make_slave)
+    added = _drive_constant(slave, 20_000_000, u, "add")
+    one, _ = _start(make_slave)
+    one.setReal([VR["tau_m[1]"], VR["tau_m[2]"]], list(u))
+    one.doStep(0.0, 20000.0)
+    assert added == one.getReal([VR[o] for o in OUT])
+
+
+def test_refused_step_says_how_far_its_end_lies_from_the_grid(make_slave):
+    """A step of 1.0000004e-3 s from 0.5 s (not a whole multiple, end 4e-10 s off the grid
+    beyond rounding): the message gives the ratio, the offset and the nearest grid point, and
+    no longer the self-contradicting 'ratio 100'."""
+    slave, log = _start(make_slave)
+    slave.doStep(0.0, 0.5)
+    with pytest.raises(FMICallException):
+        slave.doStep(0.5, 1.0000004e-3)
+    text = log.text()
+    assert "communication step size 0.0010000004 s (100.00004 rk4_step)" in text, text
+    assert "off by 4e-10 s" in text and "nearest point t = 0.501 s" in text, text
+    assert "(ratio 100)" not in text
+
+
 def _drive_constant(slave, n, u, clock):
     vin = (ctypes.c_uint * 2)(VR["tau_m[1]"], VR["tau_m[2]"])
     slave.fmi2SetReal(slave.component, vin, 2, (ctypes.c_double * 2)(*u))
@@ -143,7 +198,9 @@ def test_residual_step_of_1e_13_is_a_no_op(make_slave):
 
 
 @pytest.mark.parametrize("point, step, fragment", [
-    (0.0, 1.5e-5, "communication step size 1.5e-05 is not a whole multiple of rk4_step = 1e-05"),
+    (0.0, 1.5e-5, "communication step size 1.5e-05 s (1.5 rk4_step) is not a whole multiple of "
+                  "rk4_step = 1e-05 s (off by -5e-06 s), and the step would end at t = 1.5e-05 s, "
+                  "-5e-06 s from the nearest point t = 2e-05 s of the FMU's time grid"),
     (0.0, 0.4e-5, "not a whole multiple"),                 # rounds to zero steps, but is no residual
     (1e-3 + 2e-5, 1e-3, "expected communication point 0.001 but got 0.00102"),  # a lost RK4 step
     (1e-3 - 1e-9, 1e-3, "expected communication point 0.001"),  # beyond what rounding explains
