@@ -18,13 +18,22 @@ from .errors import SetupError
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+    except KeyboardInterrupt:
+        print("armimp: interrupted", file=sys.stderr)
+        return 130
     if not hasattr(args, "func"):
         parser.print_help()
         return 2
     try:
         return int(args.func(args) or 0)
+    except KeyboardInterrupt as exc:
+        # Ctrl-C: the workers are stopped and what finished is recorded; one line, exit 130
+        detail = f": {exc}" if str(exc) else ""
+        print(f"armimp {args.command}: interrupted{detail}", file=sys.stderr)
+        return 130
     except (ValueError, KeyError, RuntimeError, OSError) as exc:
         print(f"armimp {args.command}: error: {exc}", file=sys.stderr)
         return 1

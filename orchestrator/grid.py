@@ -17,8 +17,7 @@ from __future__ import annotations
 import json
 import time
 import traceback
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from multiprocessing import get_context
+from concurrent.futures import as_completed
 from pathlib import Path
 
 from tqdm import tqdm
@@ -163,34 +162,82 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
     start = time.perf_counter()
     bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc="grid", unit="trial",
                disable=not progress)
+    fresh = scheduler is None and bool(todo) and _once_per_process(todo[0]["fmu_path"])
+    runs = _execute(todo, str(out), workers, scheduler, fresh_worker=fresh)
+    interrupted = False
     try:
-        for res in _execute(todo, str(out), workers, scheduler):
+        for res in runs:
             results[res["name"]] = res
             bar.update(1)
             if res["status"] == "failed":
                 bar.write(f"FAILED {res['name']}: {res['error']}")
+    except KeyboardInterrupt:
+        interrupted = True  # Ctrl-C: the pool is stopped, the manifest says what finished
     finally:
+        runs.close()  # stops the workers when the loop was left early
         bar.close()
+    for t in todo:
+        if t["name"] not in results:
+            results[t["name"]] = {**{k: v for k, v in t.items() if k != "fmu_path"},
+                                  "status": "interrupted"}
+            _remove_partial(out, t["name"])
     manifest = _manifest(tasks, results, grid_options, time.perf_counter() - start)
     _write_json(out / MANIFEST, manifest)
     _write_json(out / FAILURES, {"failures": [r for r in manifest["trials"]
                                               if r["status"] == "failed"]})
+    if interrupted:
+        raise KeyboardInterrupt(f"grid interrupted: {manifest['n_done']} trial(s) done, "
+                                f"{manifest['n_interrupted']} not run; manifest "
+                                f"{out / MANIFEST}")
     return manifest
 
 
-def _execute(tasks, out_dir, workers, scheduler):
+def _remove_partial(out: Path, name: str) -> None:
+    """Remove the temporary files of a trial whose worker was stopped while writing it
+    (``.NAME.csv.*.tmp``, ``.NAME.json.*.tmp`` of the atomic writes)."""
+    for tmp in out.glob(f".{glob_escape(name)}.*.tmp"):
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+
+
+def glob_escape(text: str) -> str:
+    """``text`` with the glob characters ``*?[`` taken literally."""
+    import glob
+
+    return glob.escape(text)
+
+
+def _once_per_process(fmu_path) -> bool:
+    """True when the plant declares canBeInstantiatedOnlyOncePerProcess (each trial then
+    runs in a fresh worker process); False when it cannot be read (the trials report why)."""
+    try:
+        from .plant import read_model_description
+
+        md = read_model_description(Path(fmu_path))
+        return bool(getattr(md.coSimulation, "canBeInstantiatedOnlyOncePerProcess", False))
+    except Exception:
+        return False
+
+
+def _execute(tasks, out_dir, workers, scheduler, fresh_worker=False):
     if not tasks:
         return
     if scheduler is not None:
         yield from _execute_dask(tasks, out_dir, scheduler)
     elif workers is None or workers < 1:
         raise SetupError(f"workers must be >= 1, got {workers!r}")
-    elif workers == 1:
+    elif workers == 1 and not fresh_worker:
         for t in tasks:
             yield run_grid_task(t, out_dir)
     else:
-        # spawn: workers start clean (no inherited FMU instances or threads)
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as ex:
+        from .workers import process_pool
+
+        # spawn: workers start clean (no inherited FMU instances or threads); they die with
+        # this process, and Ctrl-C or closing this generator stops them at once; a plant
+        # that can be instantiated only once per process gets a fresh worker per trial
+        with process_pool(workers, max_tasks_per_child=1 if fresh_worker else None) as ex:
             futures = [ex.submit(run_grid_task, t, out_dir) for t in tasks]
             for fut in as_completed(futures):
                 yield fut.result()
@@ -224,6 +271,7 @@ def _manifest(tasks, results, grid_options, wall_s) -> dict:
             "n_done": sum(r["status"] == "done" for r in trials),
             "n_skipped": sum(r["status"] == "skipped" for r in trials),
             "n_failed": sum(r["status"] == "failed" for r in trials),
+            "n_interrupted": sum(r["status"] == "interrupted" for r in trials),
             "wall_s": round(wall_s, 3), "trials": trials}
 
 

@@ -19,8 +19,9 @@ import ctypes
 import difflib
 import functools
 import math
+import os
 import re
-import shutil
+import stat
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ from fmpy.model_description import ValidationError
 
 from .errors import (ContractError, FMUCallError, ParameterError, PlantFileError, PlantWarning,
                      RateError)
+from .workers import release_temp_dir
 
 _STATUS = {0: "OK", 1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal", 5: "Pending"}
 #: contract variables: name -> (causality, expected unit, required)
@@ -48,6 +50,12 @@ _BASE = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
 _REAL_TYPE = {2: "Real", 3: "Float64"}
 #: a plant starts at its posture, at rest [rad, rad/s]
 START_STATE_TOLERANCE = 1e-9
+#: limits of an FMU archive extracted by :func:`extract_fmu` (a zip bomb is refused)
+MAX_FMU_BYTES = 1 << 30
+MAX_FMU_ENTRIES = 10_000
+#: set-up parameters that change the physics when nonzero: a plant that lacks them cannot
+#: simulate such a set-up (refused by name instead of ignored)
+_NONZERO_NEEDS_PARAMETER = re.compile(r"friction\.(Fc|Fs|sigma2)\[\d+\]")
 
 
 def read_model_description(path: Path):
@@ -169,6 +177,19 @@ def check_contract(md, where: str = "plant") -> Contract:
     fixed_step, step_problem = _fixed_step(md)
     if step_problem:
         problems.append(step_problem)
+    clocks = [v.name for v in md.modelVariables if v.type == "Clock"]
+    clocked = [v.name for v in md.modelVariables if getattr(v, "clocks", None)]
+    if clocks or clocked:
+        problems.append("FMI 3.0 clocks are not driven by this master (it steps in "
+                        "Co-Simulation without events): "
+                        + "; ".join(filter(None, [
+                            f"clock(s) {', '.join(clocks[:6])}" if clocks else "",
+                            f"clocked variable(s) {', '.join(clocked[:6])}" if clocked else ""])))
+    identifier = md.coSimulation.modelIdentifier if md.coSimulation is not None else None
+    if md.coSimulation is not None:
+        bad = identifier_problem(identifier)
+        if bad:
+            problems.append(bad)
     if problems:
         raise ContractError(f"{where} breaks the plant contract (docs/spec/plant-contract.md), "
                             f"{len(problems)} problem(s):\n  - " + "\n  - ".join(problems))
@@ -178,6 +199,17 @@ def check_contract(md, where: str = "plant") -> Contract:
                     to_si_outputs=_conversions(to_si["theta"] + to_si["tau_h"]),
                     to_si_omega=_conversions(to_si["omega"]),
                     to_si_inputs=_conversions(to_si["tau_m"]), fixed_step=fixed_step)
+
+
+def identifier_problem(identifier) -> str | None:
+    """Why a ``modelIdentifier`` cannot name the FMU's binary (it becomes a file name
+    inside the extracted archive: no path separators, no ``..``), or None."""
+    if not identifier or not isinstance(identifier, str):
+        return f"modelIdentifier {identifier!r} is empty"
+    if re.search(r"[/\\:\x00]", identifier) or ".." in identifier or identifier != identifier.strip():
+        return (f"modelIdentifier {identifier!r} is not a plain name (path separators, "
+                f"'..', ':' or surrounding blanks): it names the binary inside the archive")
+    return None
 
 
 def _norm(name: str) -> str:
@@ -470,7 +502,11 @@ class Plant:
         self.parameters = {v.name: _start(v) for v in md.modelVariables
                            if v.causality == "parameter"}
         check_platform_binary(self.path, md)
-        self._unzip_dir = fmpy.extract(str(self.path))
+        self.once_per_process = bool(getattr(md.coSimulation, "canBeInstantiatedOnlyOncePerProcess",
+                                             False))
+        self.extra_inputs = {v.name: _start(v) for v in md.modelVariables
+                             if v.causality == "input" and not _is_contract_input(v.name)}
+        self._unzip_dir = str(extract_fmu(self.path))
         self._fmu = None
         self._initialized = False
         self._closed = False
@@ -479,30 +515,53 @@ class Plant:
         self.log = PlantLog()
         try:
             self._instantiate()
-        except Exception:
-            shutil.rmtree(self._unzip_dir, ignore_errors=True)
+        except BaseException:
+            release_temp_dir(self._unzip_dir)
             raise
 
     def _fn(self, name: str) -> str:
         return f"fmi{self.fmi_version}{name}"
 
     def _instantiate(self) -> None:
-        """A new instance (the previous one, if any, is freed) and its PlantIO."""
+        """A new instance and its PlantIO; the previous one, if any, is freed first (a plant
+        that can be instantiated only once per process has one instance at a time)."""
         md, c = self.model_description, self.contract
-        cls = FMU2Slave if self.fmi_version == 2 else FMU3Slave
-        fmu = cls(guid=md.guid, unzipDirectory=self._unzip_dir,
-                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName=self.instance_name)
+        old, self._fmu = self._fmu, None
+        if old is not None:
+            _free(old, terminate=self._initialized)
+        self._initialized = False
+        fmu = self._load_binary()
         logger = ({"callbacks": self.log.fmi2_callbacks()} if self.fmi_version == 2
                   else {"logMessage": self.log.fmi3_logger()})
-        _fmi(self._fn("InstantiateCoSimulation" if self.fmi_version == 3 else "Instantiate"),
-             fmu.instantiate, loggingOn=False, **logger)
-        old, self._fmu = self._fmu, fmu
-        if old is not None:
-            _free(old)
-        self._initialized = False
+        name = self._fn("InstantiateCoSimulation" if self.fmi_version == 3 else "Instantiate")
+        try:
+            _fmi(name, fmu.instantiate, loggingOn=False, **logger)
+        except FMUCallError:
+            raise self.log.explain(FMUCallError(
+                f"{self.path.name}: {name} returned NULL (the plant refused to start an "
+                f"instance)")) from None
+        self._fmu = fmu
         self.io = PlantIO(fmu.dll, fmu.component, c.vr_tau_m, c.vr_theta + c.vr_tau_h,
                           self.fmi_version, to_si_outputs=c.to_si_outputs,
                           to_si_inputs=c.to_si_inputs)
+
+    def _load_binary(self):
+        """fmpy's slave on the extracted binary; a library that cannot be loaded (garbage,
+        another architecture, a missing FMI function) is a PlantFileError naming the FMU."""
+        md = self.model_description
+        cls = FMU2Slave if self.fmi_version == 2 else FMU3Slave
+        identifier = md.coSimulation.modelIdentifier
+        cwd = os.getcwd()  # fmpy changes into the binary's folder and not back on failure
+        try:
+            return cls(guid=md.guid, unzipDirectory=self._unzip_dir, modelIdentifier=identifier,
+                       instanceName=self.instance_name)
+        except Exception as exc:  # fmpy raises bare Exception / AttributeError from ctypes
+            text = str(exc).replace(self._unzip_dir + os.sep, "").replace(self._unzip_dir, "")
+            text = text.splitlines()[0] if text else type(exc).__name__
+            raise PlantFileError(f"{self.path.name}: its binary for this platform cannot be "
+                                 f"used: {text}") from None
+        finally:
+            os.chdir(cwd)
 
     # ------------------------------------------------------------------ lifecycle
     def start(self, parameters: dict | None = None, *, optional: dict | None = None,
@@ -532,6 +591,14 @@ class Plant:
         parameters, optional = parameters or {}, optional or {}
         self.check_parameters(parameters)
         skipped = [name for name in optional if name not in self.parameters]
+        needed = [name for name in skipped
+                  if _NONZERO_NEEDS_PARAMETER.fullmatch(name) and optional[name] != 0.0]
+        if needed:
+            shown = ", ".join(f"{n} = {optional[n]:g}" for n in needed[:4])
+            raise ParameterError(
+                f"{self.path.name} has no parameter {', '.join(needed)}: the set-up's "
+                f"{shown}{', ...' if len(needed) > 4 else ''} would be ignored silently "
+                f"(simulate it at friction level 0, or on a plant with these parameters)")
         values = {k: v for k, v in optional.items() if k in self.parameters}
         values.update(parameters)
         while True:
@@ -629,8 +696,10 @@ class Plant:
                             f"{control_period / fixed:.6g})") from None
 
     def check_parameters(self, names) -> None:
-        """Raise ParameterError for names that are not parameters of this plant."""
-        unknown = [n for n in names if n not in self.parameters]
+        """Raise ParameterError for names that are neither parameters of this plant nor its
+        inputs outside the contract (:attr:`extra_inputs`, set once before initialisation
+        and then held)."""
+        unknown = [n for n in names if n not in self.parameters and n not in self.extra_inputs]
         if unknown:
             hint = ""
             if len(unknown) == 1:
@@ -676,7 +745,8 @@ class Plant:
         self._closed = True
         if self._fmu is not None:
             _free(self._fmu, terminate=self._initialized)
-        shutil.rmtree(self._unzip_dir, ignore_errors=True)
+            self._fmu = None
+        release_temp_dir(self._unzip_dir)
 
     def __enter__(self):
         return self
@@ -692,7 +762,90 @@ class Plant:
                 "fmi_version": self.model_description.fmiVersion,
                 "has_omega": bool(c.vr_omega), "fixed_communication_step_s": c.fixed_step,
                 "converted_units": bool(c.to_si_outputs or c.to_si_inputs or c.to_si_omega),
+                "once_per_process": self.once_per_process,
+                "inputs_outside_contract": dict(self.extra_inputs),
                 "parameters": dict(self.parameters)}
+
+
+def _entry_problem(name: str, info) -> str | None:
+    """Why a zip entry may not be extracted, or None."""
+    if "\x00" in name:
+        return "its name holds a NUL character"
+    if "\\" in name:
+        return "its name holds a backslash (a Windows path; FMI archives use '/')"
+    if name.startswith("/") or re.match(r"[A-Za-z]:", name):
+        return "its name is an absolute path"
+    if ".." in name.split("/"):
+        return "its name holds '..' (it would land outside the extracted folder)"
+    if stat.S_ISLNK(info.external_attr >> 16):
+        return "it is a symbolic link"
+    return None
+
+
+def extract_fmu(path) -> Path:
+    """Extract an FMU archive into a new temporary folder of this process, within limits.
+
+    The folder (``armimp-fmu-<pid>-*`` in the system temporary folder) is removed by
+    :func:`orchestrator.workers.release_temp_dir`, at the latest when the process exits;
+    one left by a killed process is removed by the next extraction.
+
+    Raises
+    ------
+    PlantFileError
+        Naming the FMU file and the entry: more than :data:`MAX_FMU_ENTRIES` entries, more
+        than :data:`MAX_FMU_BYTES` bytes uncompressed (declared or actually read), an entry
+        name that is absolute, holds a backslash or ``..``, a symbolic link, or a damaged
+        archive. Nothing is left behind.
+    """
+    from .workers import own_temp_dir, release_temp_dir
+
+    path = Path(path)
+    limit_mib = MAX_FMU_BYTES / 2**20
+    try:
+        zf = zipfile.ZipFile(path)
+    except (OSError, zipfile.BadZipFile) as exc:
+        raise PlantFileError(f"{path.name}: cannot open the FMU archive: {exc}") from None
+    with zf:
+        infos = zf.infolist()
+        if len(infos) > MAX_FMU_ENTRIES:
+            raise PlantFileError(f"{path.name}: the FMU archive has {len(infos)} entries, more "
+                                 f"than the {MAX_FMU_ENTRIES} this master extracts")
+        declared = sum(i.file_size for i in infos)
+        if declared > MAX_FMU_BYTES:
+            raise PlantFileError(f"{path.name}: the FMU archive unpacks to {declared / 2**20:.0f} "
+                                 f"MiB, more than the {limit_mib:.0f} MiB this master extracts")
+        for info in infos:
+            why = _entry_problem(info.filename, info)
+            if why:
+                raise PlantFileError(f"{path.name}: archive entry {info.filename!r} refused: {why}")
+        dest = own_temp_dir("armimp-fmu")
+        try:
+            written = 0
+            for info in infos:
+                target = dest.joinpath(*[p for p in info.filename.split("/") if p])
+                if info.is_dir():
+                    target.mkdir(parents=True, exist_ok=True)
+                    continue
+                target.parent.mkdir(parents=True, exist_ok=True)
+                with zf.open(info) as src, open(target, "wb") as dst:
+                    while chunk := src.read(1 << 20):
+                        written += len(chunk)
+                        if written > MAX_FMU_BYTES:
+                            raise PlantFileError(
+                                f"{path.name}: archive entry {info.filename!r} refused: the FMU "
+                                f"unpacks to more than {limit_mib:.0f} MiB (more than its "
+                                f"directory declares)")
+                        dst.write(chunk)
+        except PlantFileError:
+            release_temp_dir(dest)
+            raise
+        except (OSError, zipfile.BadZipFile, EOFError, RuntimeError) as exc:
+            release_temp_dir(dest)
+            raise PlantFileError(f"{path.name}: cannot extract the FMU archive: {exc}") from None
+        except BaseException:
+            release_temp_dir(dest)
+            raise
+    return dest
 
 
 def check_platform_binary(path: Path, md) -> None:
@@ -731,6 +884,10 @@ def _free(fmu, terminate: bool = True) -> None:
         fmu.freeInstance()
     except Exception:
         pass
+
+
+def _is_contract_input(name: str) -> bool:
+    return re.fullmatch(r"tau_m\[\d+\]", name) is not None
 
 
 def _start(var):

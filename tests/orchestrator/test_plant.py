@@ -114,11 +114,19 @@ def test_unknown_parameter_refused(reference_plant, linear_plant):
 
 
 def test_declared_parameters_absent_from_plant_are_recorded(linear_plant):
-    trial = simulate_trial(Setup.reference(2), perturbed_dof=1, duration_s=0.2,
+    trial = simulate_trial(Setup.reference(0), perturbed_dof=1, duration_s=0.2,
                            plant=linear_plant)
     absent = trial.meta["simulation"]["declared_parameters_not_in_plant"]
-    assert "friction.Fc[1]" in absent and "robot.m1" in absent
+    assert "friction.Fc[1]" in absent and "robot.m1" in absent  # zero friction: no change
     assert "arm.M_h[1,1]" not in absent
+
+
+def test_declared_friction_the_plant_lacks_is_refused_by_name(linear_plant):
+    """Issue 16: --friction 2 on a plant without friction parameters was ignored silently
+    (F2 equal to F0); it is refused naming the parameters and their values."""
+    with pytest.raises(ParameterError, match=r"linear_arm\.fmu has no parameter friction\.Fc\[1\]"
+                       r".*friction\.Fc\[1\] = 0\.2.*ignored silently"):
+        simulate_trial(Setup.reference(2), perturbed_dof=1, duration_s=0.2, plant=linear_plant)
 
 
 def test_instance_reused_with_reset(reference_fmu):
