@@ -61,12 +61,14 @@ def grid_seed(base_seed, perturbation_level, dof) -> int:
 
 def grid_tasks(*, friction_levels=(0, 1, 2, 3), resolution_levels=(0, 1, 2, 3),
                perturbation_levels=(1, 2, 3), dofs=(1, 2), duration_s=50.0, base_seed=0,
-               tuning="reference", effects=None, fmu_path=None, arm="2dof") -> list:
+               tuning="reference", effects=None, fmu_path=None, arm="2dof",
+               plant_parameters=None) -> list:
     """The grid's trials as plain dicts (picklable task descriptions).
 
     ``dofs`` holds 1-based joints and/or ``"all"`` (or None): all joints perturbed at once.
     ``arm``: the reference configuration, ``"2dof"`` (reference.md) or ``"3dof"``
-    (reference-3dof.md; joints 1-3).
+    (reference-3dof.md; joints 1-3). ``plant_parameters``: plant parameters or inputs
+    outside the contract (name -> value) set in every trial.
     """
     from .setup import REFERENCE_ARMS
 
@@ -88,6 +90,7 @@ def grid_tasks(*, friction_levels=(0, 1, 2, 3), resolution_levels=(0, 1, 2, 3),
                                   "perturbed_dof": k, "seed": grid_seed(base_seed, p, k),
                                   "duration_s": duration_s, "tuning": tuning,
                                   "effects": effects, "arm": arm,
+                                  "plant_parameters": dict(plant_parameters or {}) or None,
                                   "fmu_path": None if fmu_path is None else str(fmu_path)})
     return tasks
 
@@ -105,7 +108,8 @@ def run_grid_task(task: dict, out_dir: str) -> dict:
         trial = simulate_trial(setup, perturbed_dof=task["perturbed_dof"],
                                level=task["perturbation_level"], seed=task["seed"],
                                duration_s=task["duration_s"], effects=task["effects"],
-                               plant=task["fmu_path"], name=task["name"])
+                               plant=task["fmu_path"], name=task["name"],
+                               parameters=task.get("plant_parameters"))
         write_trial(Path(out_dir) / task["name"], trial)
         result["status"] = "done"
     except Exception as exc:  # one failed trial must not stop the grid

@@ -24,6 +24,7 @@ import re
 import stat
 import warnings
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -511,6 +512,7 @@ class Plant:
         self._initialized = False
         self._closed = False
         self._reset_unusable = ""     # why reset cannot be trusted ("" while it can)
+        self._warned_inputs = False   # inputs outside the contract left at start: said once
         self.reinstantiated = 0
         self.log = PlantLog()
         try:
@@ -601,6 +603,13 @@ class Plant:
                 f"(simulate it at friction level 0, or on a plant with these parameters)")
         values = {k: v for k, v in optional.items() if k in self.parameters}
         values.update(parameters)
+        unset = {k: v for k, v in self.extra_inputs.items() if k not in values}
+        if unset and not self._warned_inputs:
+            self._warned_inputs = True
+            warnings.warn(f"{self.path.name}: input(s) outside the contract held at their start "
+                          f"values: {', '.join(f'{k} = {v}' for k, v in unset.items())} (set them "
+                          f"with --plant-parameter NAME=VALUE / parameters=)", PlantWarning,
+                          stacklevel=3)
         while True:
             fresh = self._fresh_instance()
             try:
@@ -839,7 +848,7 @@ def extract_fmu(path) -> Path:
         except PlantFileError:
             release_temp_dir(dest)
             raise
-        except (OSError, zipfile.BadZipFile, EOFError, RuntimeError) as exc:
+        except (OSError, zipfile.BadZipFile, EOFError, RuntimeError, zlib.error) as exc:
             release_temp_dir(dest)
             raise PlantFileError(f"{path.name}: cannot extract the FMU archive: {exc}") from None
         except BaseException:

@@ -35,6 +35,11 @@ VARIANTS = {
                          if name.startswith("theta") else name},
     "names_prefixed": {"rename": lambda name: "plant." + name if name.startswith("theta")
                        else name},
+    # issue 16: plants at the edges of the contract
+    "motor_enable": {"defines": ["MOTOR_ENABLE"], "motor_enable": True},
+    "once_reset_fails": {"defines": ["ONCE_PER_PROCESS", "RESET_FAILS"], "once": True},
+    "once_ever_reset_fails": {"defines": ["ONCE_EVER", "RESET_FAILS"], "once": True},
+    "no_licence": {"defines": ["NO_LICENCE"]},
 }
 
 
@@ -54,6 +59,8 @@ def _variables(opts):
         for e, (i, j) in enumerate(((1, 1), (1, 2), (2, 1), (2, 2))):
             out.append((f"arm.{key}[{i},{j}]", 8 + 4 * k + e, "parameter", units[key],
                         starts[key][e]))
+    if opts.get("motor_enable"):
+        out.append(("motor_enable", 20, "input", None, 0.0))
     return out
 
 
@@ -73,7 +80,9 @@ def model_description(variant: str) -> str:
              f'generationTool="hand-written C (tests/orchestrator/swap_plants, {variant})" '
              'variableNamingConvention="structured" numberOfEventIndicators="0">',
              f'  <CoSimulation modelIdentifier="{MODEL}" canHandleVariableCommunicationStepSize='
-             f'"{"false" if fixed else "true"}"/>',
+             f'"{"false" if fixed else "true"}"'
+             + (' canBeInstantiatedOnlyOncePerProcess="true"' if opts.get("once") else "")
+             + "/>",
              "  <UnitDefinitions>"]
     lines += [f'    <Unit name="{name}"><BaseUnit {attrs}/></Unit>' for name, attrs in units.items()]
     lines += ["  </UnitDefinitions>",
@@ -84,9 +93,10 @@ def model_description(variant: str) -> str:
         variability = "fixed" if causality == "parameter" else "continuous"
         extra = ' initial="exact"' if causality == "parameter" else ""
         start_attr = f' start="{start!r}"' if start is not None else ""
+        unit_attr = f' unit="{unit}"' if unit else ""
         lines.append(f'    <ScalarVariable name="{rename(name)}" valueReference="{vr}" '
                      f'causality="{causality}" variability="{variability}"{extra}>'
-                     f'<Real unit="{unit}"{start_attr}/></ScalarVariable>')
+                     f'<Real{unit_attr}{start_attr}/></ScalarVariable>')
         if causality == "output":
             outputs.append(index)
     lines += ["  </ModelVariables>", "  <ModelStructure>", "    <Outputs>"]

@@ -12,11 +12,17 @@
  *   RESET_KEEPS_STATE  fmi2Reset returns fmi2OK but keeps the state
  *   START_OFFSET=x     theta[1] starts at x rad instead of 0 (not the start state)
  *   FIXED_STEP=h       fmi2DoStep accepts communication steps of h only
+ *   MOTOR_ENABLE       an input motor_enable outside the contract (start 0) multiplies tau_m
+ *   ONCE_PER_PROCESS   one instance at a time (fmi2Instantiate refuses a second live one)
+ *   ONCE_EVER          one instance per process, ever (not even after fmi2FreeInstance and an
+ *                      unload of the library: the mark is the process's environment)
+ *   NO_LICENCE         fmi2Instantiate logs a licence error and returns NULL
  */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "fmi2Functions.h"
 
@@ -28,13 +34,20 @@
 #define START_OFFSET 0.0
 #endif
 
-enum { VR_TAU_M = 0, VR_THETA = 2, VR_TAU_H = 4, VR_OMEGA = 6, VR_MH = 8, VR_BH = 12, VR_KH = 16, N_VR = 20 };
+#ifdef MOTOR_ENABLE
+#define ENABLE_START 0.0
+#else
+#define ENABLE_START 1.0
+#endif
+
+enum { VR_TAU_M = 0, VR_THETA = 2, VR_TAU_H = 4, VR_OMEGA = 6, VR_MH = 8, VR_BH = 12, VR_KH = 16,
+       VR_ENABLE = 20, N_VR = 21 };
 
 static const double M_R[N][N] = {{0.2090303562, 0.0524026781}, {0.0524026781, 0.050825}};
 static const double START[N_VR] = {0, 0, 0, 0, 0, 0, 0, 0,
                                    0.187, 0.084, 0.079, 0.060,
                                    0.651, 0.239, 0.236, 0.407,
-                                   7.967, 3.187, 1.663, 6.901};
+                                   7.967, 3.187, 1.663, 6.901, ENABLE_START};
 
 typedef struct {
     fmi2CallbackFunctions cb;
@@ -53,7 +66,7 @@ static void accel(const Plant *p, const double *x, double *a) {
     const double *mh = &p->r[VR_MH], *bh = &p->r[VR_BH], *kh = &p->r[VR_KH];
     double m[N][N], f[N];
     for (int i = 0; i < N; i++) {
-        f[i] = p->r[VR_TAU_M + i];
+        f[i] = p->r[VR_TAU_M + i] * p->r[VR_ENABLE];
         for (int j = 0; j < N; j++) {
             m[i][j] = M_R[i][j] + mh[N * i + j];
             f[i] -= bh[N * i + j] * x[N + j] + kh[N * i + j] * x[j];
@@ -118,12 +131,35 @@ static void startState(Plant *p) {
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
 
+static int liveInstances = 0, everInstances = 0;
+
+static fmi2Component refuse(const fmi2CallbackFunctions *cb, fmi2String name, const char *msg) {
+    if (cb && cb->logger) cb->logger(cb->componentEnvironment, name, fmi2Error, "logStatusError", "%s", msg);
+    return NULL;
+}
+
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String location,
                               const fmi2CallbackFunctions *cb, fmi2Boolean visible, fmi2Boolean loggingOn) {
     (void)location; (void)visible; (void)loggingOn;
     if (type != fmi2CoSimulation || !guid || strcmp(guid, GUID) != 0) return NULL;
+#ifdef NO_LICENCE
+    return refuse(cb, name, "licence server 27000@licence.example unreachable: no licence for SwapPlant");
+#endif
+#ifdef ONCE_PER_PROCESS
+    if (liveInstances > 0) return refuse(cb, name, "fmi2Instantiate: an instance is already live in this process");
+#endif
+#ifdef ONCE_EVER
+    char pid[32];
+    snprintf(pid, sizeof pid, "%ld", (long)getpid());
+    const char *mark = getenv("SWAP_PLANT_INSTANTIATED_IN");
+    if (mark && strcmp(mark, pid) == 0)
+        return refuse(cb, name, "fmi2Instantiate: this plant was instantiated in this process before");
+    setenv("SWAP_PLANT_INSTANTIATED_IN", pid, 1);
+#endif
     Plant *p = (Plant *)calloc(1, sizeof(Plant));
     if (!p) return NULL;
+    liveInstances++;
+    everInstances++;
     if (cb) p->cb = *cb;
     snprintf(p->name, sizeof p->name, "%s", name ? name : "?");
     memcpy(p->r, START, sizeof p->r);
@@ -131,7 +167,10 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     return p;
 }
 
-void fmi2FreeInstance(fmi2Component c) { free(c); }
+void fmi2FreeInstance(fmi2Component c) {
+    if (c) liveInstances--;
+    free(c);
+}
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cat[]) {
     (void)c; (void)on; (void)n; (void)cat;
