@@ -21,8 +21,7 @@ from __future__ import annotations
 
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from multiprocessing import get_context
+from concurrent.futures import as_completed
 
 from tqdm.auto import tqdm
 
@@ -78,9 +77,10 @@ class Runner:
             self._own_client = self._client is not scheduler
             self._scattered = self._client.scatter(state, broadcast=True)
         elif self.workers > 1:
-            self._pool = ProcessPoolExecutor(max_workers=self.workers,
-                                             mp_context=get_context("spawn"),
-                                             initializer=_init_worker, initargs=(state,))
+            from trialformat.processes import new_pool
+
+            # spawn workers that ignore Ctrl-C and die with this process
+            self._pool = new_pool(self.workers, initializer=_init_worker, initargs=(state,))
         self.timings.append({"phase": "start workers", "tasks": 0,
                              "wall_s": round(time.perf_counter() - t0, 3)})
 
@@ -121,9 +121,16 @@ class Runner:
                              "wall_s": round(time.perf_counter() - t0, 3)})
         return results
 
-    def close(self) -> None:
+    def close(self, *, now: bool = False) -> None:
+        """Shut the workers down; ``now``: cancel pending tasks and terminate running ones
+        (an error or Ctrl-C)."""
         if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+            if now:
+                from trialformat.processes import stop_pool
+
+                stop_pool(self._pool)
+            else:
+                self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
         if self._client is not None and self._own_client:
             self._client.close()
@@ -132,8 +139,8 @@ class Runner:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, *exc):
+        self.close(now=exc_type is not None)
 
 
 def worker_cache(state, key, build):

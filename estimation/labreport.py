@@ -23,7 +23,6 @@ import json
 import os
 import re
 import shutil
-import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -34,6 +33,7 @@ import numpy as np  # noqa: E402
 
 from trialformat import atomic_write  # noqa: E402
 from trialformat.logs import current_umask, replace_dir  # noqa: E402
+from trialformat.tempdirs import disown_temp_dir, own_temp_dir  # noqa: E402
 
 from .lab import FRF_UNITS, UNITS, element_indices, result_rows  # noqa: E402
 
@@ -50,7 +50,7 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
     """
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    tmp = own_temp_dir(f".{out.name}.tmp", out.parent)  # a killed run's: removed next run
     try:
         names = []
         for r in results:
@@ -62,6 +62,7 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
         names.append(_text(tmp / "results.json", json.dumps(doc, indent=1)))
         os.chmod(tmp, 0o777 & ~current_umask())
         replace_dir(tmp, out)
+        disown_temp_dir(tmp)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -25,10 +25,7 @@ import io
 import json
 import os
 import shutil
-import tempfile
-from concurrent.futures import ProcessPoolExecutor
 import multiprocessing
-from multiprocessing import get_context
 from pathlib import Path
 
 import matplotlib
@@ -41,6 +38,8 @@ from tqdm import tqdm  # noqa: E402
 import trialformat as tf  # noqa: E402
 from trialformat import reference as ref  # noqa: E402
 from trialformat.logs import current_umask, replace_dir  # noqa: E402
+from trialformat.processes import new_pool, stop_pool  # noqa: E402
+from trialformat.tempdirs import disown_temp_dir, own_temp_dir  # noqa: E402
 
 from .accuracy import true_impedance  # noqa: E402
 from .conditions import (PAPER, RECOMMENDED, VARIANT_LABELS, VARIANTS, condition_of,  # noqa: E402
@@ -154,7 +153,7 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
         pngs = [pool.submit(render_png, kind, args) if pool else render_png(kind, args)
                 for _, kind, args in figures]
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+        tmp = own_temp_dir(f".{out.name}.tmp", out.parent)  # a killed run's: removed next run
         try:
             files = _write_report(tmp, rows, skipped, arm, folders, truth, variant, compare,
                                   paths, groups)
@@ -162,9 +161,15 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
                 files.append(_atomic_bytes(tmp / name, png.result() if pool else png))
             os.chmod(tmp, 0o777 & ~current_umask())
             replace_dir(tmp, out)
+            disown_temp_dir(tmp)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
+    except BaseException:
+        if pool:
+            stop_pool(pool)  # an error or Ctrl-C: pending work cancelled, workers ended
+            pool = None
+        raise
     finally:
         if pool:
             pool.shutdown()
@@ -241,10 +246,10 @@ def _pool(workers, n_tasks):
     """Worker processes for the report, or None when they would not pay."""
     if workers is None or workers <= 1 or n_tasks < 2 * PROCESS_MIN_TASKS:
         return None
-    # fork: no re-import per worker; the main process holds no threads or FMU here
+    # fork: no re-import per worker; the main process holds no threads or FMU here; the
+    # workers ignore Ctrl-C and die with this process (trialformat.processes)
     methods = multiprocessing.get_all_start_methods()
-    ctx = get_context("fork" if "fork" in methods else "spawn")
-    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    return new_pool(workers, context="fork" if "fork" in methods else "spawn")
 
 
 def _run_tasks(tasks, pool, progress) -> list[dict]:

@@ -236,7 +236,7 @@ def _execute(tasks, out_dir, workers, scheduler, fresh_worker=False):
         for t in tasks:
             yield run_grid_task(t, out_dir)
     else:
-        from .workers import process_pool
+        from trialformat.processes import process_pool
 
         # spawn: workers start clean (no inherited FMU instances or threads); they die with
         # this process, and Ctrl-C or closing this generator stops them at once; a plant

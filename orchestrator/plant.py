@@ -34,9 +34,10 @@ from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE, fmi2Ca
 from fmpy.fmi3 import FMU3Slave
 from fmpy.model_description import ValidationError
 
+from trialformat.tempdirs import own_temp_dir, release_temp_dir
+
 from .errors import (ContractError, FMUCallError, ParameterError, PlantFileError, PlantWarning,
                      RateError)
-from .workers import release_temp_dir
 
 _STATUS = {0: "OK", 1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal", 5: "Pending"}
 #: contract variables: name -> (causality, expected unit, required)
@@ -476,6 +477,12 @@ class Plant:
     model_name, guid, generation_tool : str
     parameters : dict
         Parameter name -> start value (as declared, float for Real).
+    extra_inputs : dict
+        Inputs outside the contract (e.g. ``motor_enable``) -> start value; the master
+        never drives them; ``start(parameters=...)`` sets them like parameters.
+    once_per_process : bool
+        The plant declares ``canBeInstantiatedOnlyOncePerProcess`` (one instance at a time;
+        a grid runs each of its trials in a fresh worker process).
     reinstantiated : int
         How many times a new instance replaced one whose reset did not work.
     log : PlantLog
@@ -484,10 +491,14 @@ class Plant:
     Raises
     ------
     PlantFileError
-        Not a readable FMU, or no binary for this platform (one line naming the missing file
-        and the platforms the FMU has).
+        Not a readable FMU, an archive refused by :func:`extract_fmu`, no binary for this
+        platform (one line naming the missing file and the platforms the FMU has), or a
+        binary that cannot be loaded; always naming the FMU file.
     ContractError
-        The plant breaks the contract (every problem listed).
+        The plant breaks the contract (every problem listed; FMI 3.0 clocks and a
+        ``modelIdentifier`` that is not a plain name included).
+    FMUCallError
+        ``fmi2Instantiate`` returned NULL (naming the FMU and ending with its log lines).
     """
 
     def __init__(self, path, *, instance_name: str = "plant"):
@@ -723,20 +734,27 @@ class Plant:
         by_type = {}
         for name, value in values.items():
             var = self._variables[name]
-            by_type.setdefault(var.type, ([], []))
+            by_type.setdefault(var.type, ([], [], []))
             by_type[var.type][0].append(var.valueReference)
             by_type[var.type][1].append(value)
+            by_type[var.type][2].append(name)
         fmu = self._fmu
         if self.fmi_version == 2:
             setters = {"Real": fmu.setReal, "Integer": fmu.setInteger, "Boolean": fmu.setBoolean}
         else:
             setters = {"Float64": fmu.setFloat64, "Int32": fmu.setInt32,
                        "Boolean": fmu.setBoolean}
-        for vtype, (vrs, vals) in by_type.items():
+        for vtype, (vrs, vals, names) in by_type.items():
             if vtype not in setters:
                 raise ParameterError(f"{self.path.name}: cannot set {vtype} parameters")
             if vtype in ("Integer", "Int32"):
                 vals = [int(v) for v in vals]
+            if vtype == "Boolean":
+                bad = [(n, v) for n, v in zip(names, vals) if v not in (0, 1)]
+                if bad:
+                    raise ParameterError(f"{self.path.name}: {bad[0][0]} is a Boolean; give 0 or "
+                                         f"1, not {bad[0][1]!r}")
+                vals = [bool(v) for v in vals]
             _fmi(self._fn(f"Set{vtype}"), setters[vtype], vrs, vals)
 
     def get(self, names) -> list:
@@ -795,7 +813,7 @@ def extract_fmu(path) -> Path:
     """Extract an FMU archive into a new temporary folder of this process, within limits.
 
     The folder (``armimp-fmu-<pid>-*`` in the system temporary folder) is removed by
-    :func:`orchestrator.workers.release_temp_dir`, at the latest when the process exits;
+    :func:`trialformat.processes.release_temp_dir`, at the latest when the process exits;
     one left by a killed process is removed by the next extraction.
 
     Raises
@@ -806,8 +824,6 @@ def extract_fmu(path) -> Path:
         name that is absolute, holds a backslash or ``..``, a symbolic link, or a damaged
         archive. Nothing is left behind.
     """
-    from .workers import own_temp_dir, release_temp_dir
-
     path = Path(path)
     limit_mib = MAX_FMU_BYTES / 2**20
     try:

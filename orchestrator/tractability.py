@@ -34,8 +34,7 @@ import os
 import tempfile
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from multiprocessing import get_context
+from concurrent.futures import as_completed
 from pathlib import Path
 
 import numpy as np
@@ -398,7 +397,9 @@ def _execute(tasks, trials_dir, plants, workers):
         return
     # longest first: the pool stays busy to the end
     tasks = sorted(tasks, key=lambda t: -t["duration_s"])
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as ex:
+    from trialformat.processes import process_pool
+
+    with process_pool(workers) as ex:  # Ctrl-C stops the workers at once
         futures = [ex.submit(run_task, t, trials_dir, plants) for t in tasks]
         for fut in as_completed(futures):
             yield fut.result()

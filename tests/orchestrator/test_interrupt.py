@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator import workers
+from trialformat import processes as workers
 
 ROOT = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")

@@ -9,110 +9,28 @@ Ctrl-C and a killed parent (issue 16):
   second) and remove their temporary folders when terminated. Leaving the ``with`` block by
   an exception (KeyboardInterrupt included) cancels the pending tasks and terminates the
   workers at once (:func:`stop_pool`) instead of waiting for every submitted task.
-- :func:`own_temp_dir` makes a temporary folder whose name carries the pid of its owner; it
-  is removed when the owner exits (normally, by an exception, or by SIGTERM in a worker),
-  and one left by a killed process (SIGKILL) is removed by the next process that makes one
-  of the same kind (:func:`remove_stale`).
+- temporary folders (:mod:`trialformat.tempdirs`, re-exported here) carry the pid of their
+  owner; a worker terminated by SIGTERM removes its own before it exits.
 """
 
 from __future__ import annotations
 
-import atexit
 import os
-import re
-import shutil
 import signal
 import sys
-import tempfile
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from multiprocessing import get_context
-from pathlib import Path
 
-#: temporary folders of this process: path -> pid of the process that made it (a forked
-#: child inherits the table but must not remove its parent's folders)
-_OWNED: dict = {}
+from trialformat.tempdirs import (own_temp_dir, pid_alive, release_temp_dir,  # noqa: F401
+                                  remove_owned, remove_stale)
+
 #: seconds between two checks of the parent's pid in a worker
 PARENT_POLL_S = 1.0
 #: seconds a terminated worker gets before it is killed
 TERMINATE_GRACE_S = 2.0
-
-
-# ----------------------------------------------------------------------------- temp folders
-def own_temp_dir(kind: str, parent=None) -> Path:
-    """A new folder ``{kind}-{pid}-XXXXXX`` in ``parent`` (default: the system temporary
-    folder), removed when this process exits; stale ones of dead processes are removed
-    first.
-
-    Parameters
-    ----------
-    kind : str
-        Letters, digits, ``_``, ``.`` (the name prefix, e.g. ``armimp-fmu``).
-    parent : path, optional
-    """
-    if not re.fullmatch(r"[A-Za-z0-9_.]+(-[A-Za-z0-9_.]+)*", kind):
-        raise ValueError(f"temporary folder kind {kind!r}: letters, digits, '_', '.', '-'")
-    parent = Path(parent if parent is not None else tempfile.gettempdir())
-    remove_stale(kind, parent)
-    path = Path(tempfile.mkdtemp(prefix=f"{kind}-{os.getpid()}-", dir=parent))
-    _OWNED[str(path)] = os.getpid()
-    return path
-
-
-def release_temp_dir(path) -> None:
-    """Remove a folder made by :func:`own_temp_dir` (nothing if already gone)."""
-    path = str(path)
-    if _OWNED.get(path) == os.getpid():
-        _OWNED.pop(path, None)
-    shutil.rmtree(path, ignore_errors=True)
-
-
-def remove_owned() -> None:
-    """Remove every temporary folder this process made and still holds."""
-    me = os.getpid()
-    for path, pid in list(_OWNED.items()):
-        if pid == me:
-            shutil.rmtree(path, ignore_errors=True)
-            _OWNED.pop(path, None)
-
-
-atexit.register(remove_owned)
-
-
-def pid_alive(pid: int) -> bool:
-    """True when a process ``pid`` exists (a reused pid counts as alive: kept, not lost)."""
-    if pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    except OSError:
-        return True
-    return True
-
-
-def remove_stale(kind: str, parent) -> list:
-    """Remove the folders ``{kind}-{pid}-*`` in ``parent`` whose process is gone; returns
-    their paths. Folders of living processes (other runs) are kept."""
-    removed = []
-    pattern = re.compile(re.escape(kind) + r"-(\d+)-[^/\\]*$")
-    try:
-        entries = list(os.scandir(parent))
-    except OSError:
-        return removed
-    for entry in entries:
-        m = pattern.match(entry.name)
-        if not m or not entry.is_dir(follow_symlinks=False):
-            continue
-        if not pid_alive(int(m.group(1))):
-            shutil.rmtree(entry.path, ignore_errors=True)
-            removed.append(entry.path)
-    return removed
 
 
 # ----------------------------------------------------------------------------- workers
