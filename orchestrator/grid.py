@@ -190,7 +190,7 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
     _write_json(out / FAILURES, {"failures": [r for r in manifest["trials"]
                                               if r["status"] == "failed"]})
     if interrupted:
-        raise KeyboardInterrupt(f"grid interrupted: {manifest['n_done']} trial(s) done, "
+        raise KeyboardInterrupt(f"{manifest['n_done']} trial(s) done, "
                                 f"{manifest['n_interrupted']} not run; manifest "
                                 f"{out / MANIFEST}")
     return manifest
