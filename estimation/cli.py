@@ -180,6 +180,8 @@ def _paper_kind(trials) -> bool:
 
 def run_figures(args) -> int:
     options = options_from(args)
+    # refused before any reading: a report replaces only its own earlier report
+    tf.logs.check_report_out(args.out, args.folders)
     trials = _read(args.folders, options)
     kind = args.kind
     if kind == "auto":
