@@ -18,6 +18,8 @@ from pathlib import Path
 import trialformat as tf
 from trialformat import reference as ref
 
+from trialformat.cliargs import MAX_FFT, number
+
 from .conditions import PAPER, RECOMMENDED
 from .estimator import METHODS
 from .lab import UNITS, AnalysisOptions, analyse, element_indices, estimation_units
@@ -34,12 +36,17 @@ def _analysis_arguments(p, truth_default="none") -> None:
                    help="auto: full (T P^-1) for one-joint trials or position trials with "
                         "a recorded reference, closed_loop for all-joints trials, direct "
                         "(angle to torque) for position trials without a reference")
-    g.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
+    g.add_argument("--band", nargs=2, type=number("--band", 0, 1e6, "0 15", lo_open=False),
+                   metavar=("LO", "HI"),
                    help="fit band [Hz] (default 0 to the declared perturbation.cutoff_hz)")
-    g.add_argument("--nperseg", type=int, default=8192, help="Welch segment [samples]")
-    g.add_argument("--noverlap", type=int, help="Welch overlap [samples] (default 3/4 "
+    g.add_argument("--nperseg", type=number("--nperseg", 2, MAX_FFT, 8192, integer=True,
+                                            lo_open=False),
+                   default=8192, help="Welch segment [samples]")
+    g.add_argument("--noverlap", type=number("--noverlap", 0, MAX_FFT, 6144, integer=True,
+                                             lo_open=False), help="Welch overlap [samples] (default 3/4 "
                                                  "of the segment)")
-    g.add_argument("--nfft", type=int, help="FFT length [samples] (default: the segment)")
+    g.add_argument("--nfft", type=number("--nfft", 2, MAX_FFT, 8192, integer=True,
+                                         lo_open=False), help="FFT length [samples] (default: the segment)")
     g.add_argument("--window", default="hann", help="Welch window (scipy.signal name)")
     g.add_argument("--sampling-correction", choices=("auto", "on", "off"), default="auto",
                    help="half-sample delay of the inertial term for left-limit torque "
