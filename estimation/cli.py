@@ -21,6 +21,7 @@ from trialformat import reference as ref
 from trialformat.cliargs import MAX_FFT, number
 
 from .conditions import PAPER, RECOMMENDED
+from .errors import EstimationError
 from .estimator import METHODS
 from .lab import UNITS, AnalysisOptions, analyse, element_indices, estimation_units
 from .labreport import write_lab_report
@@ -131,18 +132,40 @@ def _read(sources, options):
     return trials
 
 
-def lab_results(trials, options, truth_name="none"):
+def lab_results(trials, options, truth_name="none", failures=None):
+    """Analyse every recording or condition. With a ``failures`` list, a condition the
+    estimator refuses (EstimationError: too few segments, a joint without a trial...) is
+    appended to it as ``(label, message)`` and the others go on; without, it raises."""
     results = []
     for unit in estimation_units(trials, pool=options.pool):
         truth = _truth(truth_name, unit.trials[0].n_dof)
-        results.append(analyse(unit, options, truth=truth))
+        try:
+            results.append(analyse(unit, options, truth=truth))
+        except EstimationError as exc:
+            if failures is None:
+                raise
+            failures.append((unit.label, str(exc)))
     return results
+
+
+def _report_failures(failures, results) -> int:
+    """Print one line per failed condition; exit status 1 when any failed."""
+    if failures and not results:  # nothing to write: the refusal itself, one line
+        if len(failures) == 1:
+            raise EstimationError(failures[0][1])
+        raise EstimationError("no condition could be estimated: " + "; ".join(
+            f"{label}: {message}" for label, message in failures))
+    for label, message in failures:
+        print(f"error: {label}: {message}", file=sys.stderr)
+    return 1 if failures else 0
 
 
 def run_estimate(args) -> int:
     options = options_from(args)
     trials = _read(args.source, options)
-    results = lab_results(trials, options, args.truth)
+    failures = []
+    results = lab_results(trials, options, args.truth, failures)
+    status = _report_failures(failures, results)
     for r in results:
         print(describe(r))
     if args.json:
@@ -151,7 +174,7 @@ def run_estimate(args) -> int:
                 "leakage_removed": r.corrections["window_leakage"]} for r in results]
         args.json.parent.mkdir(parents=True, exist_ok=True)
         tf.atomic_write(args.json, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
-    return 0 if results else 1
+    return status if results else 1
 
 
 def describe(r) -> str:
@@ -190,7 +213,7 @@ def run_figures(args) -> int:
     # refused before any reading: a report replaces only its own earlier report
     tf.logs.check_report_out(args.out, args.folders)
     trials = _read(args.folders, options)
-    kind = args.kind
+    kind, status = args.kind, 0
     if kind == "auto":
         kind = "paper" if _paper_kind(trials) else "lab"
     if kind == "paper":
@@ -202,16 +225,21 @@ def run_figures(args) -> int:
         result = make_report(args.folders, args.out, truth=truth, variant=args.fig_variant,
                              compare=compare)
         files = result["files"]
+        for k in result["skipped"]:  # per condition and method, the report goes on
+            print(f"skipped: {k['condition']} ({k['tuning']}) {k['method']}: {k['reason']}",
+                  file=sys.stderr)
     else:
         truth = "none" if args.truth == "auto" else args.truth
-        results = lab_results(trials, options, truth)
+        failures = []
+        results = lab_results(trials, options, truth, failures)
+        status = _report_failures(failures, results)
         files = write_lab_report(results, args.out, options={
             **options.__dict__, "truth": truth})
         for r in results:
             print(describe(r))
     for f in files:
         print(f)
-    return 0
+    return status
 
 
 def main(argv=None) -> int:
