@@ -128,7 +128,7 @@ def _read(sources, options):
         for s in sources:
             trials += tf.read_trials(s, min_samples=options.nperseg)
     for w in caught:
-        print(f"note: {w.message}", file=sys.stderr)
+        print(f"note: {tf.csvtable.printable(str(w.message))}", file=sys.stderr)
     return trials
 
 
@@ -162,6 +162,8 @@ def _report_failures(failures, results) -> int:
 
 def run_estimate(args) -> int:
     options = options_from(args)
+    if args.json is not None:
+        _check_json_out(args.json)
     trials = _read(args.source, options)
     failures = []
     results = lab_results(trials, options, args.truth, failures)
@@ -175,6 +177,23 @@ def run_estimate(args) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         tf.atomic_write(args.json, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
     return status if results else 1
+
+
+def _check_json_out(path: Path) -> None:
+    """Refuse a ``--json`` that would overwrite a trial's metadata or a folder."""
+    if path.is_dir():
+        raise tf.OutputError(f"--json {path}: is a folder; give a file name "
+                             f"(e.g. {path / 'results.json'})")
+    if path.is_file():
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8-sig"))
+        except (ValueError, UnicodeDecodeError):
+            doc = None
+        if isinstance(doc, dict) and "n_dof" in doc or (
+                isinstance(doc, dict) and str(doc.get("format", "")).startswith(
+                    "arm-impedance-trial")):
+            raise tf.OutputError(f"--json {path}: is a trial's metadata (it would be "
+                                 f"replaced by the results); give another file name")
 
 
 def describe(r) -> str:
@@ -249,5 +268,6 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (ValueError, OSError, KeyError) as exc:
-        print(f"python -m estimation {args.command}: error: {exc}", file=sys.stderr)
+        print(f"python -m estimation {args.command}: error: "
+              f"{tf.csvtable.printable(str(exc))}", file=sys.stderr)
         return 1

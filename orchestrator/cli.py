@@ -37,7 +37,10 @@ def main(argv=None) -> int:
     try:
         return int(args.func(args) or 0)
     except (ValueError, KeyError, RuntimeError, OSError) as exc:
-        print(f"armimp {args.command}: error: {exc}", file=sys.stderr)
+        # escaped: a file's bytes (a binary header, escape sequences) never reach the
+        # terminal raw
+        from trialformat.csvtable import printable
+        print(f"armimp {args.command}: error: {printable(str(exc))}", file=sys.stderr)
         return 1
 
 

@@ -5,7 +5,7 @@ Shared by the orchestrator (which writes trials) and the estimation and diagnosi
 MATLAB ``.mat`` v4-v7.3 (scipy.io, h5py).
 """
 
-from . import reference
+from . import csvtable, reference
 from .errors import MatFileError, OutputError, TrialFormatError
 from .logs import (FORMAT, MIN_SAMPLES, SIGNALS, Trial, atomic_write, check_trial,
                    column_names, default_metadata, read_trial, read_trials, required_columns,

@@ -106,3 +106,22 @@ def test_dotted_condition_labels_write_distinct_files(tmp_path, trial):
     names = os.listdir(tmp_path / "out")
     assert {"frf_day1.left.csv", "frf_day1.right.csv", "frf_day1.left.json",
             "frf_day1.right.json"} <= set(names)
+
+
+def test_estimate_json_onto_a_trial_metadata_refused(tmp_path, trial, capsys):
+    tf.write_trial(tmp_path / "S1", trial)
+    before = (tmp_path / "S1.json").read_bytes()
+    assert main(["estimate", str(tmp_path), "--json", str(tmp_path / "S1.json"),
+                 "--nperseg", "2048"]) == 1
+    assert "is a trial's metadata" in capsys.readouterr().err
+    assert (tmp_path / "S1.json").read_bytes() == before
+
+
+def test_cli_error_escapes_terminal_control_bytes(tmp_path, capsys):
+    from orchestrator.cli import main as armimp
+    name = tmp_path / "evil\x1b]0;title\x07.csv"
+    name.write_bytes(b"\x1b[2Jt,x\n0,1\n")
+    (tmp_path / "evil\x1b]0;title\x07.json").write_text("{}")
+    assert armimp(["estimate", str(name)]) == 1
+    err = capsys.readouterr().err
+    assert "\x1b" not in err and "\x07" not in err and "\\x1b[2J" in err
