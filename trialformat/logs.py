@@ -231,8 +231,9 @@ def check_report_out(out: str | os.PathLike, inputs=()) -> None:
 
     Refused: an existing file; a folder that is, or holds, one of ``inputs`` (files or
     folders, compared after resolving links); a non-empty folder without the marker
-    :data:`REPORT_MARK` of an earlier report. A missing or empty folder, or an earlier
-    report, is accepted.
+    :data:`REPORT_MARK` of an earlier report (or, for reports written before the marker,
+    their ``report.json`` / ``results.json`` index). A missing or empty folder, or an
+    earlier report, is accepted.
 
     Raises
     ------
@@ -251,10 +252,27 @@ def check_report_out(out: str | os.PathLike, inputs=()) -> None:
             raise OutputError(f"--out {out}: is or holds the input {source}; a report "
                               f"replaces its folder, so it must not hold the trials: give "
                               f"a folder outside the inputs (e.g. {out.name}_report)")
-    if out.is_dir() and not (out / REPORT_MARK).is_file() and any(out.iterdir()):
+    if out.is_dir() and not (out / REPORT_MARK).is_file() and not _earlier_report(out) \
+            and any(out.iterdir()):
         raise OutputError(f"--out {out}: folder is not empty and is not a report of this "
                           f"project (no {REPORT_MARK}); it is left as it is: give a new or "
                           f"empty folder")
+
+
+def _earlier_report(out: Path) -> bool:
+    """A report written before reports were marked: its own index file (``report.json`` of
+    the paper kind, ``results.json`` of the lab kind) with the keys this project writes."""
+    for name, keys in (("report.json", {"variant_in_figures", "rows", "summary"}),
+                       ("results.json", {"options", "results"})):
+        path = out / name
+        if path.is_file():
+            try:
+                doc = json.loads(path.read_text(encoding="utf-8"))
+            except (ValueError, UnicodeDecodeError, OSError):
+                continue
+            if isinstance(doc, dict) and keys <= set(doc):
+                return True
+    return False
 
 
 def replace_dir(tmp: str | os.PathLike, out: str | os.PathLike, kind: str = "report") -> None:

@@ -86,8 +86,10 @@ def test_report_replaces_only_its_own_earlier_report(tmp_path, trial, capsys):
     (out / "stale.txt").write_text("from the first report")  # part of our folder now
     assert _figures([tmp_path / "in"], out) == 0
     assert set(os.listdir(out)) == first  # replaced whole, marker kept
-    # the marker is what makes it ours: without it the same folder is refused
+    # the marker (or an older report's index) is what makes it ours: without them the
+    # same folder is refused
     os.unlink(out / tf.logs.REPORT_MARK)
+    os.unlink(out / "results.json")
     _refused(capsys, [tmp_path / "in"], out, "not a report of this project")
     with pytest.raises(tf.OutputError, match="not a report"):  # the library refuses too
         tf.logs.replace_dir(tmp_path / "in", out)
@@ -125,3 +127,14 @@ def test_cli_error_escapes_terminal_control_bytes(tmp_path, capsys):
     assert armimp(["estimate", str(name)]) == 1
     err = capsys.readouterr().err
     assert "\x1b" not in err and "\x07" not in err and "\\x1b[2J" in err
+
+
+def test_unmarked_report_of_an_earlier_version_is_still_replaced(tmp_path, trial):
+    tf.write_trial(tmp_path / "in" / "S1", trial)
+    out = tmp_path / "old_report"
+    out.mkdir()
+    (out / "results.json").write_text('{"options": {}, "results": []}')
+    (out / "parameters.csv").write_text("old")
+    assert _figures([tmp_path / "in"], out) == 0
+    assert (out / tf.logs.REPORT_MARK).is_file()
+    assert (out / "parameters.csv").read_text() != "old"
