@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from trialformat.cliargs import MAX_SAMPLES, number
+
 from . import catalogue as cat
 
 
@@ -26,7 +28,8 @@ def register(subparsers) -> None:
                    help="local processes for the simulations (default: one per core)")
     p.add_argument("--scheduler", default=None,
                    help="Dask distributed scheduler address (e.g. tcp://127.0.0.1:8786)")
-    p.add_argument("--rk4-step", type=float, default=None,
+    p.add_argument("--rk4-step", type=number("--rk4-step", 0, 0.01, 1e-5, unit="s"),
+                   default=None,
                    help="the plant's internal RK4 step [s]; must divide the sample period "
                         "(default: the plant's, or the nearest step that divides it)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -40,7 +43,8 @@ def register(subparsers) -> None:
     v.add_argument("--pairs", type=int, default=2, help="sets with two effects")
     v.add_argument("--outside", type=int, default=1,
                    help="sets with an effect outside the catalogue")
-    v.add_argument("--duration", type=float, default=12.0, help="trial length [s]")
+    v.add_argument("--duration", type=number("--duration", 0, MAX_SAMPLES / 1000, 12,
+                                             unit="s"), default=12.0, help="trial length [s]")
     v.add_argument("--seed", type=int, default=2024, help="seed of the draws")
     v.add_argument("--workers", type=int, default=None,
                    help="local processes per diagnosis (default: one per core)")
@@ -79,8 +83,38 @@ def _validate(args) -> int:
     specs = draw_specs(np.random.default_rng(args.seed), n_per_effect=args.per_effect,
                        n_nominal=args.nominal, n_pairs=args.pairs, n_outside=args.outside,
                        duration_s=args.duration)
+    _check_options(Path(args.out), {"--per-effect": args.per_effect, "--nominal": args.nominal,
+                                     "--pairs": args.pairs, "--outside": args.outside,
+                                     "--duration": args.duration, "--seed": args.seed})
     result = run_validation(specs, args.out, progress=not args.quiet,
                             workers=args.workers, scheduler=args.scheduler)
     print(result["table_markdown"])
     print(f"score table: {Path(args.out) / 'score.md'}")
-    return 0
+    failed = result["summary"]["failed_sets"]
+    if failed:
+        print(f"validate-diagnosis: {len(failed)} of {len(specs)} sets failed: "
+              f"{', '.join(f['set'] for f in failed)}")
+    return 1 if failed else 0
+
+
+OPTIONS_FILE = "validation.json"
+
+
+def _check_options(out: Path, options: dict) -> None:
+    """Refuse a resumed ``validate-diagnosis`` with other options, naming each option;
+    record the options of a new run (``OUT/validation.json``)."""
+    import json
+
+    from .validation import _atomic_json
+    path = out / OPTIONS_FILE
+    if path.is_file():
+        previous = json.loads(path.read_text(encoding="utf-8")).get("options", {})
+        diff = [f"{k} {previous.get(k)!r} there, {v!r} now" for k, v in options.items()
+                if previous.get(k) != v]
+        if diff:
+            raise ValueError(f"{out} holds a validation run made with other options "
+                             f"({'; '.join(diff)}); use another --out, or the options of "
+                             f"that run")
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    _atomic_json(path, {"format": "arm-impedance-validation/1", "options": options})

@@ -15,8 +15,9 @@ simulation), reported by name, and corrected before the diagnosis proper:
   trial of this set-up can have, that becomes a plausible one (< 0.5 rad) in radians;
 - **torque sign reversed**: the arm impedance estimated from the trials has a negative
   stiffness on every joint (a passive limb's is positive), and a positive one with -tau_h;
-- **t rounded**: ``t`` differs from n / fs (its storage rounded it); the trial is read on
-  the uniform grid n / fs.
+- **t rounded** (a storage note, never a verdict): ``t`` is n / fs stored at its precision
+  (float32, printed decimals); **t off the grid**: ``t`` differs from n / fs beyond its
+  storage precision. Either way the trial is read on the uniform grid n / fs.
 """
 
 from __future__ import annotations
@@ -49,12 +50,17 @@ class Finding:
         The numbers that show it.
     corrected : bool
         The diagnosis corrected the data and went on.
+    note : bool
+        A storage note, not a mismatch: the file stores the expected values at its
+        precision (``t`` = n/fs in float32 or printed decimals). It never changes the
+        verdict.
     """
 
     name: str
     where: str
     evidence: str
     corrected: bool = True
+    note: bool = False
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -125,20 +131,38 @@ def check_angles(trials) -> tuple[list, list]:
 
 
 def check_time(trials) -> list:
-    """``t`` stored rounded (its values differ from n / fs): a finding, the diagnosis
-    uses n / fs. The stored values are ``Trial.t_stored`` when the reader kept them (it
-    returns ``t`` as the exact grid), else ``Trial.t``."""
+    """``t`` stored other than n / fs: the diagnosis uses n / fs either way.
+
+    Judged against the storage precision of ``t`` (storage.detect_storage): a stored ``t``
+    within half a storage step of n / fs at every sample (float32, printed decimals or
+    digits) is n / fs stored at that precision, a storage note ("t rounded", ``note``
+    True) that never changes the verdict; beyond, ``t`` itself is off the grid ("t off
+    the grid": a clock that is not n / fs), a finding. The stored values are
+    ``Trial.t_stored`` when the reader kept them (it returns ``t`` as the exact grid),
+    else ``Trial.t``."""
     findings = []
     for t in trials:
         stored = t.t if getattr(t, "t_stored", None) is None else t.t_stored
         exact = np.arange(t.n_samples) / t.fs
-        off = np.max(np.abs(stored - exact))
+        err = np.abs(stored - exact)
+        off = np.max(err)
         if off > 0 and off > 4 * np.finfo(float).eps * exact[-1]:
             storage = detect_storage(stored)
-            findings.append(Finding(
-                "t rounded", t.name,
-                f"t stored as {storage.describe()}, up to {off:.3g} s from n/fs; read as "
-                f"uniform at fs = {t.fs:g} Hz"))
+            half = 0.5 * storage.step(exact) + 4 * np.spacing(np.abs(exact))
+            if np.all(err <= half * (1 + 1e-6)):
+                findings.append(Finding(
+                    "t rounded", t.name,
+                    f"t stored as {storage.describe()}, up to {off:.3g} s from n/fs: "
+                    f"within its storage precision (half a step, up to "
+                    f"{float(np.max(half)):.3g} s); read as uniform at fs = {t.fs:g} Hz",
+                    note=True))
+            else:
+                row = int(np.argmax(err > half * (1 + 1e-6)))
+                findings.append(Finding(
+                    "t off the grid", t.name,
+                    f"t stored as {storage.describe()} is up to {off:.3g} s from n/fs, "
+                    f"beyond its storage precision (at sample {row}: {err[row]:.3g} s, half "
+                    f"a step {half[row]:.3g} s); read as uniform at fs = {t.fs:g} Hz"))
     return findings
 
 

@@ -589,7 +589,7 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
                     + ", ".join(f"{n['trial']} at {n['failed_rk4_step']:.3g} s" for n in numerics)
                     + f" and was run at {numerics[0]['rk4_step']:.3g} s (a numerical failure, "
                     "not a model mismatch).")
-    mismatches = [f for f in findings if not f.name.startswith("declared")]
+    mismatches = [f for f in findings if not f.name.startswith("declared") and not f.note]
     if mismatches:
         if verdict == VERDICT_NONE:
             verdict = VERDICT_CONVENTION

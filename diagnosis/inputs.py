@@ -29,15 +29,13 @@ def trial_paths(source) -> list[Path]:
         folder = Path(source)
         if not folder.is_dir():
             raise DiagnosisInputError(f"{folder}: not a folder of trials")
-        paths = sorted(folder.glob("*.csv")) + sorted(folder.glob("*.mat"))
-        both = sorted({p.stem for p in paths if p.suffix == ".csv"}
-                      & {p.stem for p in paths if p.suffix == ".mat"})
-        if both:
-            raise DiagnosisInputError(f"{folder}: trial(s) {both} present both as .csv and "
-                                      f".mat; keep one")
+        try:
+            paths = tf.logs.folder_trials(folder)  # .csv, .csv.gz, .mat; dotted names kept
+        except tf.TrialFormatError as exc:
+            raise DiagnosisInputError(str(exc)) from None
     else:
         paths = [Path(p) for p in source]
-    paths = [p for p in paths if not p.stem.endswith(".truth")]
+    paths = [p for p in paths if not tf.trial_stem(p).name.endswith(".truth")]
     if not paths:
         raise DiagnosisInputError(f"{source}: no trial (no NAME.csv with its NAME.json, "
                                   f"no NAME.mat)")

@@ -77,14 +77,14 @@ def write_represented(stem, trial: tf.Trial, rep: str) -> Path:
     header = ",".join(tf.column_names(trial.n_dof)) + "\n"
     meta = copy.deepcopy(trial.meta)
     meta.setdefault("format", tf.FORMAT)
-    _atomic(stem.with_suffix(".json"), json.dumps(meta, indent=2).encode())
-    _atomic(stem.with_suffix(".csv"), (header + body).encode())
-    return stem.with_suffix(".csv")
+    _atomic(tf.logs.with_ending(stem, ".json"), json.dumps(meta, indent=2).encode())
+    _atomic(tf.logs.with_ending(stem, ".csv"), (header + body).encode())
+    return tf.logs.with_ending(stem, ".csv")
 
 
 def _write_mat32(stem: Path, trial: tf.Trial) -> Path:
     from scipy import io as sio
-    path = stem.with_suffix(".mat")
+    path = tf.logs.with_ending(stem, ".mat")
     data = {"t": np.asarray(trial.t, dtype=float)[:, None],
             "meta": json.dumps(trial.meta)}
     data.update({s: np.asarray(trial.signal(s)).astype(np.float32) for s in tf.SIGNALS})
@@ -109,4 +109,4 @@ def _atomic(path: Path, payload: bytes) -> None:
 def trial_written(stem) -> bool:
     """True when ``stem`` exists as a complete CSV+JSON pair or as a ``.mat``."""
     stem = Path(stem)
-    return tf.trial_exists(stem) or stem.with_suffix(".mat").is_file()
+    return tf.trial_exists(stem) or tf.logs.with_ending(stem, ".mat").is_file()

@@ -22,9 +22,12 @@ def nominal_setup(meta: dict, arm):
     return Setup.from_metadata(meta).with_arm(arm.M, arm.B, arm.K)
 
 
-#: a run whose plant state became non-finite is retried once with the plant's RK4 step
-#: divided by this (LuGre sigma0 = 1e6 N m/rad needs 5e-7 s where the reference is 1e-5 s)
-NUMERICAL_RETRY_FACTOR = 20
+#: a run whose plant state became non-finite is retried down this ladder of divisors of
+#: the plant's RK4 step until a run is finite (LuGre sigma0 = 1e6 N m/rad diverges at
+#: 5e-7 s and runs at 1e-7 s where the reference is 1e-5 s); each rung costs its factor
+#: in plant time, so the ladder stops at 1e-8 s for the reference step
+NUMERICAL_RETRY_FACTORS = (20, 100, 1000)
+NUMERICAL_RETRY_FACTOR = NUMERICAL_RETRY_FACTORS[0]  # the first rung (kept for callers)
 
 
 def simulate_like(trial, setup, effects: dict | None, n_samples: int, *, plant=None,
@@ -33,10 +36,11 @@ def simulate_like(trial, setup, effects: dict | None, n_samples: int, *, plant=N
 
     The plant's RK4 step divides the control period at any rate (``rk4_step`` or the
     orchestrator's choice near the plant's default). A run whose plant failed (an FMI
-    error: a non-finite state) is retried once with the step divided by
-    NUMERICAL_RETRY_FACTOR: if that run succeeds, the failure was numerical (a stiff
-    model such as a large LuGre sigma0 at 1e-5 s), not the model; the run returned then
-    records ``meta["simulation"]["numerical_retry"]``. A loop that leaves its torque or
+    error: a non-finite state) is retried with the step divided by each of
+    NUMERICAL_RETRY_FACTORS in turn until a run is finite: if one succeeds, the failure
+    was numerical (a stiff model such as a large LuGre sigma0 at 1e-5 s), not the model;
+    the run returned then records ``meta["simulation"]["numerical_retry"]`` (the steps
+    that failed and the one that ran). A loop that leaves its torque or
     angle limits is a model that cannot reproduce the experiment (None), not retried.
 
     Returns
@@ -70,18 +74,26 @@ def simulate_like(trial, setup, effects: dict | None, n_samples: int, *, plant=N
     if default is None:
         return None
     first = rk4_step if rk4_step is not None else rk4_step_for(1.0 / trial.fs, float(default))
-    smaller = first / NUMERICAL_RETRY_FACTOR
-    try:
-        sim = run(smaller)
-    except (RuntimeError, FloatingPointError, OverflowError) as exc:
-        if not _model_failure(exc):
-            raise DiagnosisSimulationError(f"simulating {trial.name}: {exc}") from exc
-        return None
-    if not _finite(sim):
-        return None
-    sim.meta["simulation"]["numerical_retry"] = {
-        "failed_rk4_step": first, "rk4_step": smaller, "failure": failure[:300]}
-    return sim
+    failed = [first]
+    for factor in NUMERICAL_RETRY_FACTORS:
+        smaller = first / factor
+        try:
+            sim = run(smaller)
+        except (RuntimeError, FloatingPointError, OverflowError) as exc:
+            if not _model_failure(exc):
+                raise DiagnosisSimulationError(f"simulating {trial.name}: {exc}") from exc
+            if type(exc).__name__ != "FMUCallError":
+                return None  # the loop left its limits: the model, not the numerics
+            failed.append(smaller)
+            continue
+        if not _finite(sim):
+            failed.append(smaller)
+            continue
+        sim.meta["simulation"]["numerical_retry"] = {
+            "failed_rk4_step": first, "failed_rk4_steps": failed, "rk4_step": smaller,
+            "failure": failure[:300]}
+        return sim
+    return None
 
 
 def _model_failure(exc) -> bool:

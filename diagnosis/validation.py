@@ -12,7 +12,7 @@ import json
 import math
 import os
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from itertools import product
 from pathlib import Path
 
@@ -21,6 +21,7 @@ from tqdm.auto import tqdm
 
 
 from . import catalogue as cat
+from .errors import DiagnosisInputError
 from .core import VERDICT_EFFECT, VERDICT_NONE, DiagnosisConfig, diagnose
 from .outside import make_model
 from .representation import REPRESENTATIONS, trial_written, write_represented
@@ -167,7 +168,10 @@ def make_set(spec: SetSpec, folder, *, plant=None) -> Path:
     from orchestrator import Setup, simulate_trial
 
     folder = Path(folder) / spec.name
+    check_spec(folder / SET_FILE, spec)
     folder.mkdir(parents=True, exist_ok=True)
+    if not (folder / SET_FILE).is_file():
+        _atomic_json(folder / SET_FILE, spec_record(spec))
     setup = Setup.reference(friction_level=spec.friction_level,
                             resolution_level=spec.resolution_level, tuning=spec.tuning())
     n = setup.n_dof
@@ -189,6 +193,41 @@ def make_set(spec: SetSpec, folder, *, plant=None) -> Path:
         _atomic_json(Path(str(stem) + TRUTH_SUFFIX), spec.truth())
         write_represented(stem, trial, spec.representation)
     return folder
+
+
+#: A set folder's record of the spec it was made with (checked on resuming).
+SET_FILE = "set.json"
+
+
+def spec_record(spec: SetSpec) -> dict:
+    """The spec as JSON-comparable data (every field: effects, seeds, duration, levels,
+    representation, extra truth)."""
+    return json.loads(json.dumps(asdict(spec), sort_keys=True, default=repr))
+
+
+def check_spec(path: Path, spec: SetSpec, recorded=None) -> None:
+    """Refuse to resume a set made from another spec (another --seed or --duration draws
+    other sets under the same names), naming the fields that differ.
+
+    ``recorded``: the spec stored in a score row (else read from ``path`` if present).
+
+    Raises
+    ------
+    DiagnosisInputError
+    """
+    if recorded is None:
+        if not Path(path).is_file():
+            return
+        recorded = json.loads(Path(path).read_text(encoding="utf-8"))
+    now = spec_record(spec)
+    diff = [f"{k}: {recorded.get(k)!r} there, {now.get(k)!r} now" for k in now
+            if json.dumps(recorded.get(k), sort_keys=True) != json.dumps(now.get(k),
+                                                                         sort_keys=True)]
+    if diff:
+        raise DiagnosisInputError(
+            f"{path}: set {spec.name!r} was made with other options ({'; '.join(diff)}); "
+            f"its trials and score would be reused: use another --out, or the options of "
+            f"that run")
 
 
 def _atomic_json(path: Path, obj) -> None:
@@ -276,6 +315,15 @@ def run_validation(specs, out_dir, *, config: DiagnosisConfig = DiagnosisConfig(
     :func:`diagnose`.
     """
     out = Path(out_dir)
+    for spec in specs:  # all refused up front, before any set is reused or remade
+        row_path = out / "reports" / spec.name / "score_row.json"
+        if row_path.is_file():
+            recorded = json.loads(row_path.read_text()).get("spec")
+            if recorded is None:
+                raise DiagnosisInputError(f"{row_path}: a score row that records no spec "
+                                          f"(an older run); remove it to score the set again")
+            check_spec(row_path, spec, recorded)
+        check_spec(out / "sets" / spec.name / SET_FILE, spec)
     rows = []
     bar = tqdm(specs, desc="validation sets", disable=not progress, unit="set")
     for spec in bar:
@@ -294,7 +342,7 @@ def run_validation(specs, out_dir, *, config: DiagnosisConfig = DiagnosisConfig(
                          "truth": sorted(n for n, _ in spec.effects)})
             continue
         row = {"set": spec.name, **score_one(report, read_truth(folder)),
-               "truth_params": {n: p for n, p in spec.effects}}
+               "truth_params": {n: p for n, p in spec.effects}, "spec": spec_record(spec)}
         _atomic_json(row_path, _jsonable(row))
         rows.append(row)
     summary = summarise(rows)

@@ -18,7 +18,10 @@ from pathlib import Path
 import trialformat as tf
 from trialformat import reference as ref
 
+from trialformat.cliargs import MAX_FFT, number
+
 from .conditions import PAPER, RECOMMENDED
+from .errors import EstimationError
 from .estimator import METHODS
 from .lab import UNITS, AnalysisOptions, analyse, element_indices, estimation_units
 from .labreport import write_lab_report
@@ -34,12 +37,17 @@ def _analysis_arguments(p, truth_default="none") -> None:
                    help="auto: full (T P^-1) for one-joint trials or position trials with "
                         "a recorded reference, closed_loop for all-joints trials, direct "
                         "(angle to torque) for position trials without a reference")
-    g.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
+    g.add_argument("--band", nargs=2, type=number("--band", 0, 1e6, "0 15", lo_open=False),
+                   metavar=("LO", "HI"),
                    help="fit band [Hz] (default 0 to the declared perturbation.cutoff_hz)")
-    g.add_argument("--nperseg", type=int, default=8192, help="Welch segment [samples]")
-    g.add_argument("--noverlap", type=int, help="Welch overlap [samples] (default 3/4 "
+    g.add_argument("--nperseg", type=number("--nperseg", 2, MAX_FFT, 8192, integer=True,
+                                            lo_open=False),
+                   default=8192, help="Welch segment [samples]")
+    g.add_argument("--noverlap", type=number("--noverlap", 0, MAX_FFT, 6144, integer=True,
+                                             lo_open=False), help="Welch overlap [samples] (default 3/4 "
                                                  "of the segment)")
-    g.add_argument("--nfft", type=int, help="FFT length [samples] (default: the segment)")
+    g.add_argument("--nfft", type=number("--nfft", 2, MAX_FFT, 8192, integer=True,
+                                         lo_open=False), help="FFT length [samples] (default: the segment)")
     g.add_argument("--window", default="hann", help="Welch window (scipy.signal name)")
     g.add_argument("--sampling-correction", choices=("auto", "on", "off"), default="auto",
                    help="half-sample delay of the inertial term for left-limit torque "
@@ -120,22 +128,46 @@ def _read(sources, options):
         for s in sources:
             trials += tf.read_trials(s, min_samples=options.nperseg)
     for w in caught:
-        print(f"note: {w.message}", file=sys.stderr)
+        print(f"note: {tf.csvtable.printable(str(w.message))}", file=sys.stderr)
     return trials
 
 
-def lab_results(trials, options, truth_name="none"):
+def lab_results(trials, options, truth_name="none", failures=None):
+    """Analyse every recording or condition. With a ``failures`` list, a condition the
+    estimator refuses (EstimationError: too few segments, a joint without a trial...) is
+    appended to it as ``(label, message)`` and the others go on; without, it raises."""
     results = []
     for unit in estimation_units(trials, pool=options.pool):
         truth = _truth(truth_name, unit.trials[0].n_dof)
-        results.append(analyse(unit, options, truth=truth))
+        try:
+            results.append(analyse(unit, options, truth=truth))
+        except EstimationError as exc:
+            if failures is None:
+                raise
+            failures.append((unit.label, str(exc)))
     return results
+
+
+def _report_failures(failures, results) -> int:
+    """Print one line per failed condition; exit status 1 when any failed."""
+    if failures and not results:  # nothing to write: the refusal itself, one line
+        if len(failures) == 1:
+            raise EstimationError(failures[0][1])
+        raise EstimationError("no condition could be estimated: " + "; ".join(
+            f"{label}: {message}" for label, message in failures))
+    for label, message in failures:
+        print(f"error: {label}: {message}", file=sys.stderr)
+    return 1 if failures else 0
 
 
 def run_estimate(args) -> int:
     options = options_from(args)
+    if args.json is not None:
+        _check_json_out(args.json)
     trials = _read(args.source, options)
-    results = lab_results(trials, options, args.truth)
+    failures = []
+    results = lab_results(trials, options, args.truth, failures)
+    status = _report_failures(failures, results)
     for r in results:
         print(describe(r))
     if args.json:
@@ -144,7 +176,24 @@ def run_estimate(args) -> int:
                 "leakage_removed": r.corrections["window_leakage"]} for r in results]
         args.json.parent.mkdir(parents=True, exist_ok=True)
         tf.atomic_write(args.json, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
-    return 0 if results else 1
+    return status if results else 1
+
+
+def _check_json_out(path: Path) -> None:
+    """Refuse a ``--json`` that would overwrite a trial's metadata or a folder."""
+    if path.is_dir():
+        raise tf.OutputError(f"--json {path}: is a folder; give a file name "
+                             f"(e.g. {path / 'results.json'})")
+    if path.is_file():
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8-sig"))
+        except (ValueError, UnicodeDecodeError):
+            doc = None
+        if isinstance(doc, dict) and "n_dof" in doc or (
+                isinstance(doc, dict) and str(doc.get("format", "")).startswith(
+                    "arm-impedance-trial")):
+            raise tf.OutputError(f"--json {path}: is a trial's metadata (it would be "
+                                 f"replaced by the results); give another file name")
 
 
 def describe(r) -> str:
@@ -180,8 +229,10 @@ def _paper_kind(trials) -> bool:
 
 def run_figures(args) -> int:
     options = options_from(args)
+    # refused before any reading: a report replaces only its own earlier report
+    tf.logs.check_report_out(args.out, args.folders)
     trials = _read(args.folders, options)
-    kind = args.kind
+    kind, status = args.kind, 0
     if kind == "auto":
         kind = "paper" if _paper_kind(trials) else "lab"
     if kind == "paper":
@@ -193,16 +244,21 @@ def run_figures(args) -> int:
         result = make_report(args.folders, args.out, truth=truth, variant=args.fig_variant,
                              compare=compare)
         files = result["files"]
+        for k in result["skipped"]:  # per condition and method, the report goes on
+            print(f"skipped: {k['condition']} ({k['tuning']}) {k['method']}: {k['reason']}",
+                  file=sys.stderr)
     else:
         truth = "none" if args.truth == "auto" else args.truth
-        results = lab_results(trials, options, truth)
+        failures = []
+        results = lab_results(trials, options, truth, failures)
+        status = _report_failures(failures, results)
         files = write_lab_report(results, args.out, options={
             **options.__dict__, "truth": truth})
         for r in results:
             print(describe(r))
     for f in files:
         print(f)
-    return 0
+    return status
 
 
 def main(argv=None) -> int:
@@ -212,5 +268,6 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (ValueError, OSError, KeyError) as exc:
-        print(f"python -m estimation {args.command}: error: {exc}", file=sys.stderr)
+        print(f"python -m estimation {args.command}: error: "
+              f"{tf.csvtable.printable(str(exc))}", file=sys.stderr)
         return 1

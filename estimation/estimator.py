@@ -185,17 +185,26 @@ def estimate_impedance(trials, *, method="decomposition", band_hz=BAND_HZ,
     options = WelchOptions(nperseg=nperseg, noverlap=noverlap, nfft=nfft, window=window,
                            detrend=detrend)
     fs, n = _common_rate_and_size(trials)
-    if method in ("decomposition", "full"):
-        f, P, T, cP, cT, P1, P2, nseg = _decomposed_responses(trials, n, fs, options)
-    else:
-        f, P, T, cP, cT, P1, P2, nseg = _mimo_responses(trials, n, fs, options, method)
-    if method == "decomposition":
-        Z = T / np.diagonal(P, axis1=1, axis2=2)[:, None, :]
-    elif method == "direct":
-        Z = T  # _mimo_responses put the theta -> tau_h H1 estimate there
-        T = np.full_like(Z, np.nan)
-    else:
-        Z = np.linalg.solve(np.swapaxes(P, 1, 2), np.swapaxes(T, 1, 2)).swapaxes(1, 2)
+    if method in ("closed_loop", "direct") and n > 1:
+        _check_mimo_segments(trials, n, options)
+    try:
+        if method in ("decomposition", "full"):
+            f, P, T, cP, cT, P1, P2, nseg = _decomposed_responses(trials, n, fs, options)
+        else:
+            f, P, T, cP, cT, P1, P2, nseg = _mimo_responses(trials, n, fs, options, method)
+        if method == "decomposition":
+            Z = T / np.diagonal(P, axis1=1, axis2=2)[:, None, :]
+        elif method == "direct":
+            Z = T  # _mimo_responses put the theta -> tau_h H1 estimate there
+            T = np.full_like(Z, np.nan)
+        else:
+            Z = np.linalg.solve(np.swapaxes(P, 1, 2), np.swapaxes(T, 1, 2)).swapaxes(1, 2)
+    except np.linalg.LinAlgError as exc:
+        raise EstimationError(
+            f"trials {[t.name for t in trials]}: the {method} estimate is singular ({exc}): "
+            f"the trials do not excite every joint independently over "
+            f"{sum(options.n_segments(t.n_samples) for t in trials)} Welch segment(s) of "
+            f"{options.nperseg} samples") from None
     cZ = cT * np.diagonal(cP, axis1=1, axis2=2)[:, None, :]
     return ImpedanceEstimate(f=f, Z=Z, P=P, T=T, coherence_P=cP, coherence_T=cT,
                              coherence_Z=cZ, P1=P1, P2=P2, method=method, fs=fs,
@@ -216,6 +225,33 @@ def as_method(estimate: ImpedanceEstimate, method: str) -> ImpedanceEstimate:
         Z = np.linalg.solve(np.swapaxes(estimate.P, 1, 2),
                             np.swapaxes(estimate.T, 1, 2)).swapaxes(1, 2)
     return replace(estimate, Z=Z, method=method)
+
+
+#: Welch averages below which the coherence and the intervals are not trustworthy (one
+#: segment gives coherence 1 by construction).
+MIN_AVERAGES = 8
+
+
+def nperseg_for(n_samples: int, options: WelchOptions, averages: int = MIN_AVERAGES) -> int:
+    """Largest power-of-two Welch segment giving ``averages`` segments of ``n_samples``
+    at the options' overlap fraction (a value to suggest to the user)."""
+    step = 1.0 - options.noverlap / options.nperseg
+    longest = n_samples / (1.0 + (averages - 1) * step)
+    return int(2 ** max(4, int(np.floor(np.log2(max(longest, 16))))))
+
+
+def _check_mimo_segments(trials, n, options) -> None:
+    """Refuse an all-joints (MIMO) estimate over fewer Welch segments than joints: its
+    n x n cross-spectral matrix of the perturbations is then singular at every frequency."""
+    nseg = sum(max(options.n_segments(t.n_samples), 0) for t in trials)
+    if nseg < n:
+        shortest = min(t.n_samples for t in trials)
+        raise EstimationError(
+            f"trials {[t.name for t in trials]}: {nseg} Welch segment(s) of "
+            f"{options.nperseg} samples cannot separate {n} joints perturbed at once (the "
+            f"perturbations' cross-spectral matrix is singular with fewer than {n} "
+            f"segments; {MIN_AVERAGES} or more for a usable coherence): use --nperseg "
+            f"{nperseg_for(shortest, options)} or longer trials")
 
 
 def _common_rate_and_size(trials) -> tuple[float, int]:

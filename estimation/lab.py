@@ -306,8 +306,27 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
         vaf=np.atleast_2d(vaf(Zb, ref_Z)), coherence_band=est.mean_coherence())
     if truth is not None:
         result.errors_pct = {p: 100 * v for p, v in fit.relative_errors(*truth).items()}
-    result.warnings = fit_warnings(result, options)
+    result.warnings = fit_warnings(result, options) + few_segments_warning(usable, result)
     return result
+
+
+def few_segments_warning(trials, result) -> list[str]:
+    """A warning when the Welch estimate averages fewer than MIN_AVERAGES segments: the
+    coherence is biased towards 1 (exactly 1 for one segment) and the intervals too
+    narrow. Names the count and a segment length that gives enough averages."""
+    from .estimator import MIN_AVERAGES, nperseg_for
+    from .spectral import WelchOptions
+
+    if result.n_segments >= MIN_AVERAGES:
+        return []
+    w = result.welch
+    hint = nperseg_for(min(t.n_samples for t in trials),
+                       WelchOptions(nperseg=w["nperseg"], noverlap=w["noverlap"],
+                                    nfft=w["nfft"], window=w["window"]))
+    return [f"few Welch averages: {result.n_segments} segment(s) of {w['nperseg']} samples "
+            f"(< {MIN_AVERAGES}): the coherence is biased towards 1 (exactly 1 with one "
+            f"segment) and the intervals are too narrow; use --nperseg {hint} or longer "
+            f"trials"]
 
 
 def _usable(trials, method):
@@ -411,9 +430,10 @@ def fit_warnings(result: LabResult, options: AnalysisOptions) -> list[str]:
             out.append(f"low coherence: Z{_e(i, k, n)} band mean {c:.2f} (< "
                        f"{options.coherence_min})")
         r2 = fit.r2[i, k]
-        if r2 < options.r2_min and (i == k or n == 1):
+        if r2 < options.r2_min:
+            what = "this joint" if i == k else f"the coupling of joints {i + 1} and {k + 1}"
             out.append(f"poor fit: Z{_e(i, k, n)} R^2 = {r2:.3f} (< {options.r2_min}); the "
-                       f"second-order model may not describe this joint in this band")
+                       f"second-order model may not describe {what} in this band")
     if result.method == "direct":
         out.append("direct estimate (angle to torque): biased where the subject's own torque "
                    "or sensor noise moves the angle; record the reference (theta_ref) for an "

@@ -61,7 +61,7 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
         doc = {"options": options or {}, "results": [r.to_json() for r in results]}
         names.append(_text(tmp / "results.json", json.dumps(doc, indent=1)))
         os.chmod(tmp, 0o777 & ~current_umask())
-        replace_dir(tmp, out)
+        replace_dir(tmp, out, kind="lab")
         disown_temp_dir(tmp)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -82,8 +82,9 @@ def write_frf(result, stem: Path) -> list[Path]:
            "band_hz": list(result.band_hz),
            "units": {c: _unit(c) for c in cols},
            "columns": {c: np.asarray(v, dtype=float).tolist() for c, v in cols.items()}}
-    return [_text(stem.with_suffix(".csv"), buf.getvalue()),
-            _text(stem.with_suffix(".json"), json.dumps(doc))]
+    stem = Path(stem)  # names keep their dots: frf_day1.left.csv, not frf_day1.csv
+    return [_text(stem.with_name(stem.name + ".csv"), buf.getvalue()),
+            _text(stem.with_name(stem.name + ".json"), json.dumps(doc))]
 
 
 def _unit(column: str) -> str:

@@ -74,17 +74,16 @@ def trial_paths(sources) -> list[Path]:
     paths = []
     for source in map(Path, sources):
         if source.is_dir():
-            paths += sorted(source.glob("*.csv")) + sorted(source.glob("*.mat"))
-        elif source.suffix.lower() in (".csv", ".mat") and source.is_file():
+            paths += tf.logs.folder_trials(source)
+        elif source.name.lower().endswith((".csv", ".csv.gz", ".mat")) and source.is_file():
             paths.append(source)
-        elif source.suffix.lower() == ".json" and source.with_suffix(".csv").is_file():
-            paths.append(source.with_suffix(".csv"))
         else:
-            found = [q for q in (source.with_suffix(".csv"), source.with_suffix(".mat"))
+            stem = tf.trial_stem(source)
+            found = [q for q in (tf.logs.with_ending(stem, e) for e in (".csv", ".csv.gz", ".mat"))
                      if q.is_file()]
             if len(found) > 1:
-                raise EstimationError(f"{source}: trial present both as .csv and .mat; "
-                                      f"name one file")
+                raise EstimationError(f"{source}: trial present as "
+                                      f"{', '.join(q.name for q in found)}; name one file")
             paths += found
     if not paths:
         raise EstimationError(f"no trial (a folder of NAME.csv or NAME.mat, such a file, or "
@@ -129,6 +128,7 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
     out = Path(out)
     arm = ref.arm_matrices(_TRUTH_ARMS[truth]) if truth in _TRUTH_ARMS else None
     folders = [folders] if isinstance(folders, (str, os.PathLike)) else list(folders)
+    tf.logs.check_report_out(out, folders)  # before any work: never over an input
     paths = trial_paths(folders)
     tasks = _condition_tasks(paths, arm, variants)
     pool = _pool(workers, len(tasks))
@@ -160,7 +160,7 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
             for (name, *_), png in zip(figures, pngs):
                 files.append(_atomic_bytes(tmp / name, png.result() if pool else png))
             os.chmod(tmp, 0o777 & ~current_umask())
-            replace_dir(tmp, out)
+            replace_dir(tmp, out, kind="paper")
             disown_temp_dir(tmp)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -209,12 +209,12 @@ class _MetaOnly:
 
     def __init__(self, path):
         self.path = Path(path)
-        self.name = self.path.stem
+        self.name = tf.trial_stem(self.path).name
         if self.path.suffix.lower() == ".mat":
             self.meta = tf.read_trial(self.path, min_samples=0).meta
         else:
-            self.meta = json.loads(self.path.with_suffix(".json").read_text(encoding="utf-8-sig"))
-            tf.logs.complete_metadata(self.meta, self.path.with_suffix(".json"))
+            json_path = tf.logs.with_ending(tf.trial_stem(self.path), ".json")
+            self.meta = tf.logs._read_metadata(json_path)[0]
 
     @property
     def n_dof(self):

@@ -14,7 +14,18 @@ import json
 import sys
 from pathlib import Path
 
+from trialformat.cliargs import MAX_SAMPLES, check_samples, number
+
 from .errors import SetupError
+
+# parse-time checks of the numbers (trialformat.cliargs): out-of-range values are refused
+# in one line naming the option and a value that works
+_DURATION = number("--duration", 0, MAX_SAMPLES / 1000, 50, unit="s")
+_FS = number("--fs", 0, 100_000, 1000, unit="Hz")
+_RK4 = number("--rk4-step", 0, 0.01, 1e-5, unit="s")
+_COMM = number("--comm-step", 0, 1, 0.001, unit="s")
+_WORKERS = number("--workers", 1, 1024, 2, integer=True, lo_open=False)
+_TOTALS = number("--totals", 0, MAX_SAMPLES / 1000, 70, unit="s")
 
 
 def main(argv=None) -> int:
@@ -35,7 +46,10 @@ def main(argv=None) -> int:
         print(f"armimp {args.command}: interrupted{detail}", file=sys.stderr)
         return 130
     except (ValueError, KeyError, RuntimeError, OSError) as exc:
-        print(f"armimp {args.command}: error: {exc}", file=sys.stderr)
+        # escaped: a file's bytes (a binary header, escape sequences) never reach the
+        # terminal raw
+        from trialformat.csvtable import printable
+        print(f"armimp {args.command}: error: {printable(str(exc))}", file=sys.stderr)
         return 1
 
 
@@ -68,7 +82,7 @@ def _add_simulate(sub):
     p.add_argument("--perturbation", type=int, default=3, help="perturbation level 1-3")
     p.add_argument("--dof", default="1", help="perturbed joint (1-based) or 'all'")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--duration", type=float, default=50.0, help="trial length [s]")
+    p.add_argument("--duration", type=_DURATION, default=50.0, help="trial length [s]")
     p.add_argument("--tuning", default="reference", choices=("reference", "robust"))
     p.add_argument("--arm", default="2dof", choices=("2dof", "3dof"),
                    help="reference configuration: two joints (reference.md) or shoulder, "
@@ -77,12 +91,12 @@ def _add_simulate(sub):
                    help="switch the controller's time-delay estimation off")
     p.add_argument("--effects", default=None,
                    help='hidden effects as JSON, e.g. \'{"delay": {"samples": 2}}\'')
-    p.add_argument("--comm-step", type=float, default=None,
+    p.add_argument("--comm-step", type=_COMM, default=None,
                    help="communication step [s] (default: the control period)")
     p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
-    p.add_argument("--fs", type=float, default=None,
+    p.add_argument("--fs", type=_FS, default=None,
                    help="control and sampling rate [Hz] (default: the reference 1000 Hz)")
-    p.add_argument("--rk4-step", type=float, default=None,
+    p.add_argument("--rk4-step", type=_RK4, default=None,
                    help="the plant's internal RK4 step [s]; it must divide the "
                         "communication step (default: the plant's, or the step nearest it "
                         "that divides the communication step)")
@@ -99,6 +113,7 @@ def _simulate(args) -> int:
     dof = None if args.dof == "all" else _int(args.dof, "--dof")
     effects = _json(args.effects, "--effects")
     setup = Setup.reference(args.friction, args.resolution, args.tuning, args.arm)
+    check_samples(args.duration, args.fs or setup.fs)
     if args.fs is not None:
         setup = dataclasses.replace(setup, fs=float(args.fs))
     if args.no_tde:
@@ -121,10 +136,10 @@ def _add_grid(sub):
                        description="Run a grid of trials into OUT (resumable). Seeds: "
                                    "base + 10 P + k, k = 0 for all joints.")
     p.add_argument("out", help="output folder (re-running skips completed trials)")
-    p.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    p.add_argument("--workers", type=_WORKERS, default=2, help="local processes (default 2)")
     p.add_argument("--scheduler", default=None,
                    help="Dask distributed scheduler address (e.g. tcp://127.0.0.1:8786)")
-    p.add_argument("--duration", type=float, default=50.0, help="trial length [s]")
+    p.add_argument("--duration", type=_DURATION, default=50.0, help="trial length [s]")
     p.add_argument("--friction", type=int, nargs="+", default=[0, 1, 2, 3])
     p.add_argument("--resolution", type=int, nargs="+", default=[0, 1, 2, 3])
     p.add_argument("--perturbation", type=int, nargs="+", default=[1, 2, 3])
@@ -172,9 +187,9 @@ def _add_paper(sub):
                     "trials, 16 with --arm 3dof; 15-25 s).")
     p.add_argument("--out", required=True, help="run folder (re-running resumes)")
     p.add_argument("--tuning", default="reference", choices=("reference", "robust"))
-    p.add_argument("--duration", type=float, default=None,
+    p.add_argument("--duration", type=_DURATION, default=None,
                    help="trial length [s] (default 50; 20 with --quick)")
-    p.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    p.add_argument("--workers", type=_WORKERS, default=2, help="local processes (default 2)")
     p.add_argument("--scheduler", default=None,
                    help="Dask distributed scheduler address (e.g. tcp://127.0.0.1:8786)")
     p.add_argument("--quick", action="store_true",
@@ -212,10 +227,10 @@ def _add_tractability(sub):
                     "OUT/fig_tractability.png (resumable).")
     p.add_argument("--out", required=True, help="run folder (re-running resumes)")
     p.add_argument("--n", type=int, nargs="+", default=None, help="numbers of joints (2..7)")
-    p.add_argument("--totals", type=float, nargs="+", default=None,
+    p.add_argument("--totals", type=_TOTALS, nargs="+", default=None,
                    help="total experiment times T [s] (default 70 175 350)")
     p.add_argument("--quick", action="store_true", help="n = 2, 3, 4 at T = 70 s")
-    p.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    p.add_argument("--workers", type=_WORKERS, default=2, help="local processes (default 2)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_tractability)
 

@@ -34,6 +34,8 @@ MASTER_SIDE = ("delay", "sensor_noise", "quantization")
 SIGNED = {("gravity", "tilt_deg")}
 #: parameters that must be > 0
 POSITIVE = {("inertia_mismatch", "scale"), ("delay", "samples")}
+#: upper limits, refused up front (a delay line of 1e8 samples would exhaust memory)
+MAXIMUM = {("delay", "samples"): 100_000}
 
 
 @dataclass
@@ -125,6 +127,8 @@ def _check_value(name, param, kind, value, n_dof):
             raise EffectError(f"{where} must be > 0, got {v!r}")
         if (name, param) not in SIGNED and v < 0:
             raise EffectError(f"{where} must be >= 0, got {v!r}")
+        if (name, param) in MAXIMUM and v > MAXIMUM[name, param]:
+            raise EffectError(f"{where} must be <= {MAXIMUM[name, param]}, got {v!r}")
     if kind == JOINT:
         return [float(v) for v in values]
     return values[0] if kind == INTEGER else float(values[0])

@@ -146,8 +146,14 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
         wall time; failures also in ``failures.json``.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     tasks = grid_tasks(**grid_options)
+    check_fmu(grid_options.get("fmu_path"))
+    options = _manifest_options(grid_options)
+    check_resume(out, options)  # before any trial is skipped as "already there"
+    out.mkdir(parents=True, exist_ok=True)
+    if not (out / MANIFEST).is_file():  # a killed run still says what it was made with
+        _write_json(out / MANIFEST, {"format": GRID_FORMAT, "status": "running",
+                                     "options": options})
     if grid_options.get("fmu_path") is None:
         from .setup import REFERENCE_ARMS
         from .trial import default_fmu_path
@@ -261,14 +267,72 @@ def _execute_dask(tasks, out_dir, scheduler):
             client.close()
 
 
-def _manifest(tasks, results, grid_options, wall_s) -> dict:
-    trials = [results[t["name"]] for t in tasks]
+#: Options that decide a trial's content, with their defaults (grid_tasks) and the CLI
+#: option: a resumed grid must agree on them, or its skipped trials would be another run's.
+RESUME_CHECKED = {"duration_s": (50.0, "--duration"), "base_seed": (0, "--seed"),
+                  "tuning": ("reference", "--tuning"), "effects": (None, "--effects"),
+                  "arm": ("2dof", "--arm"), "fmu": (None, "--fmu")}
+
+
+def check_fmu(fmu_path) -> None:
+    """Refuse up front a plant FMU that is not there or not a zip archive (otherwise every
+    trial of a grid would fail on it in turn)."""
+    if fmu_path is None:
+        return
+    import zipfile
+    path = Path(fmu_path)
+    if not path.is_file():
+        raise SetupError(f"--fmu {path}: no such file (give a plant .fmu; without --fmu "
+                         f"the reference plant is used)")
+    if not zipfile.is_zipfile(path):
+        raise SetupError(f"--fmu {path}: not an FMU (an FMU is a zip archive)")
+
+
+def check_resume(out, options: dict) -> None:
+    """Refuse to resume the grid in ``out`` with options (:data:`RESUME_CHECKED`) other
+    than those its ``grid.json`` records, naming each option and both values.
+
+    Raises
+    ------
+    SetupError
+        ``out/grid.json`` records other options, or is not a grid manifest.
+    """
+    path = Path(out) / MANIFEST
+    if not path.is_file():
+        return
+    try:
+        previous = json.loads(path.read_text(encoding="utf-8"))["options"]
+        if not isinstance(previous, dict):
+            raise TypeError("options is not an object")
+    except (ValueError, KeyError, TypeError) as exc:
+        raise SetupError(f"{path}: not a grid manifest ({exc}); remove it or use another "
+                         f"output folder") from None
+
+    def norm(value):
+        return json.dumps(value, sort_keys=True)
+
+    diff = [f"{flag} {previous.get(k, d)!r} there, {options.get(k, d)!r} now"
+            for k, (d, flag) in RESUME_CHECKED.items()
+            if norm(previous.get(k, d)) != norm(options.get(k, d))]
+    if diff:
+        raise SetupError(f"{out} holds a grid made with other options ({'; '.join(diff)}): "
+                         f"its trials would be skipped as done; use another output folder, "
+                         f"or the options of that run")
+
+
+def _manifest_options(grid_options) -> dict:
     options = {k: (list(v) if isinstance(v, tuple) else v) for k, v in grid_options.items()
                if k != "fmu_path"}
     if "dofs" in options:
         options["dofs"] = [ALL_JOINTS if parse_dof(k) is None else k for k in options["dofs"]]
     if grid_options.get("fmu_path") is not None:
         options["fmu"] = Path(grid_options["fmu_path"]).name
+    return options
+
+
+def _manifest(tasks, results, grid_options, wall_s) -> dict:
+    trials = [results[t["name"]] for t in tasks]
+    options = _manifest_options(grid_options)
     return {"format": GRID_FORMAT,
             "seeds": SEED_RULE,
             "options": options, "n_trials": len(trials),

@@ -344,6 +344,11 @@ def run_tractability(out, *, ns=NS, totals_s=TOTALS_S, quick=False, workers=2,
     bad = [n for n in ns if not 2 <= int(n) <= 7]
     if bad:
         raise SetupError(f"the study has n in 2..7, got {bad}")
+    bad = [T for T in totals_s if not (isinstance(T, (int, float)) and np.isfinite(T)
+                                       and T > 0)]
+    if bad:  # before any folder or plant is made
+        raise SetupError(f"total experiment times must be finite and > 0 [s], got {bad} "
+                         f"(e.g. --totals 70 175 350)")
     out = Path(out)
     trials_dir = out / "trials"
     trials_dir.mkdir(parents=True, exist_ok=True)

@@ -5,14 +5,15 @@ Shared by the orchestrator (which writes trials) and the estimation and diagnosi
 MATLAB ``.mat`` v4-v7.3 (scipy.io, h5py).
 """
 
-from . import reference
-from .errors import MatFileError, TrialFormatError
+from . import csvtable, reference
+from .errors import MatFileError, OutputError, TrialFormatError
 from .logs import (FORMAT, MIN_SAMPLES, SIGNALS, Trial, atomic_write, check_trial,
                    column_names, default_metadata, read_trial, read_trials, required_columns,
-                   trial_exists, write_trial)
-from .matlab import is_mat, read_trial_mat, write_trial_mat
+                   trial_exists, trial_stem, write_trial)
+from .matlab import is_mat, read_trial_mat, read_trials_mat, write_trial_mat
 
-__all__ = ["reference", "TrialFormatError", "MatFileError", "FORMAT", "MIN_SAMPLES",
+__all__ = ["reference", "TrialFormatError", "MatFileError", "OutputError", "trial_stem",
+           "read_trials_mat", "FORMAT", "MIN_SAMPLES",
            "SIGNALS", "Trial", "atomic_write", "check_trial", "column_names",
            "default_metadata", "read_trial", "read_trials", "required_columns",
            "trial_exists", "write_trial", "is_mat", "read_trial_mat", "write_trial_mat"]

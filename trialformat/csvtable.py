@@ -12,6 +12,7 @@ at fault.
 from __future__ import annotations
 
 import csv
+import gzip
 import io
 from pathlib import Path
 
@@ -24,18 +25,58 @@ from .errors import TrialFormatError
 DELIMITERS = (",", ";", "\t")
 
 
+#: Longest header line read [characters]: a file whose first line is longer (a binary
+#: file, or no newline at all) is refused instead of read whole into memory.
+MAX_HEADER_CHARS = 1 << 20
+
+
+def open_text(path: Path):
+    """The file as text (UTF-8, BOM removed, undecodable bytes replaced), gunzipped when
+    its name ends in ``.gz``."""
+    if str(path).lower().endswith(".gz"):
+        return gzip.open(path, "rt", encoding="utf-8-sig", errors="replace", newline="")
+    return open(path, encoding="utf-8-sig", errors="replace", newline="")
+
+
+def printable(text: str) -> str:
+    """``text`` with control and other non-printable characters escaped (``\\x1b``,
+    ``\\u200b``), so a binary or escape-sequence header is never echoed raw to a
+    terminal."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii")
+                   for c in text)
+
+
 def read_header(path: Path) -> tuple[list[str], str]:
     """Header names (quotes, BOM and surrounding blanks removed) and the field separator.
 
-    The separator is the candidate giving the most header fields.
+    The separator is the candidate giving the most header fields. At most
+    :data:`MAX_HEADER_CHARS` characters are read: a longer first line is refused.
+
+    Raises
+    ------
+    TrialFormatError
+        Empty file, a first line longer than :data:`MAX_HEADER_CHARS`, or a file that is
+        not gzip although its name ends in ``.gz``.
     """
     # undecodable bytes can only be in extra names (declared ones are ASCII): replaced
-    with open(path, encoding="utf-8-sig", errors="replace", newline="") as fh:
-        first = fh.readline()
+    try:
+        with open_text(path) as fh:
+            first = fh.readline(MAX_HEADER_CHARS + 1)
+    except (OSError, EOFError) as exc:  # gzip.BadGzipFile is an OSError
+        raise TrialFormatError(f"{path}: not readable as "
+                               f"{'gzip' if str(path).lower().endswith('.gz') else 'text'}: "
+                               f"{exc}") from None
+    if len(first) > MAX_HEADER_CHARS:
+        raise TrialFormatError(f"{path}: first line (the header) is longer than "
+                               f"{MAX_HEADER_CHARS} characters with no line end: not a CSV "
+                               f"trial (one header line, then one row per sample)")
     if not first.strip():
         raise TrialFormatError(f"{path}: file is empty (no header row)")
-    best = max(DELIMITERS, key=lambda d: len(next(csv.reader([first], delimiter=d))))
-    header = [h.strip() for h in next(csv.reader([first], delimiter=best))]
+    try:
+        best = max(DELIMITERS, key=lambda d: len(next(csv.reader([first], delimiter=d))))
+        header = [h.strip() for h in next(csv.reader([first], delimiter=best))]
+    except csv.Error as exc:
+        raise TrialFormatError(f"{path}: header row does not parse as CSV: {exc}") from None
     return header, best
 
 
@@ -101,7 +142,7 @@ def _as_float(column) -> np.ndarray:
 def _locate_error(path, header, delimiter, numeric, exc) -> None:
     """Find the first bad row/cell with the csv module and raise naming it."""
     wanted = {header.index(name): name for name in numeric}
-    with open(path, encoding="utf-8-sig", errors="replace", newline="") as fh:
+    with open_text(path) as fh:
         reader = csv.reader(fh, delimiter=delimiter)
         next(reader)
         for row_no, row in enumerate(reader, start=1):
@@ -117,7 +158,7 @@ def _locate_error(path, header, delimiter, numeric, exc) -> None:
                 except ValueError:
                     hint = (" (a decimal comma? write '.' as the decimal mark)"
                             if "," in cell and delimiter != "," else "")
-                    raise TrialFormatError(f"{path}: non-numeric value {cell!r} in column "
+                    raise TrialFormatError(f"{path}: non-numeric value {printable(repr(cell))} in column "
                                            f"'{name}' at data row {row_no}{hint}") from None
     raise TrialFormatError(f"{path}: CSV does not parse: {exc}") from None
 

@@ -13,3 +13,9 @@ class MatFileError(TrialFormatError):
 
     The message names the file and the variable or key.
     """
+
+
+class OutputError(ValueError):
+    """An output path that would replace or delete what this project did not write (an
+    input, a folder that is not one of its reports, an existing file). The message names
+    the path and what would work."""

@@ -21,11 +21,21 @@ import numpy as np
 
 from . import reference as ref
 from . import csvtable
-from .errors import TrialFormatError
+from .errors import OutputError, TrialFormatError
 
 FORMAT = "arm-impedance-trial/1"
 SIGNALS = ("tau_delta", "theta", "tau_h", "tau_m")
 MIN_SAMPLES = 8192  # one spectral segment (Table IV)
+#: Most joints a trial may declare (n_dof): a limit far above any arm, refused up front
+#: instead of exhausting memory on the metadata's per-joint arrays.
+MAX_DOF = 64
+#: File endings of a trial, longest first (a name keeps its other dots: S1.dof1.csv is
+#: the trial S1.dof1).
+TRIAL_SUFFIXES = (".csv.gz", ".csv", ".json", ".mat")
+#: Marker file of a report folder written by this project: only such a folder (or an
+#: empty one) is replaced by a new report.
+REPORT_MARK = ".armimp-report.json"
+REPORT_FORMAT = "arm-impedance-report/1"
 
 
 @dataclass
@@ -158,7 +168,7 @@ def write_trial(stem: str | os.PathLike, trial: Trial) -> Path:
     the sign and angle conventions the metadata declare are restored on writing. The
     files get the user's umask (as ``open`` would), not the private mode of a temp file.
     """
-    stem = Path(stem)
+    stem = trial_stem(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     n = trial.n_dof
     header, cols = ["t"], [trial.t[:, None]]
@@ -171,7 +181,7 @@ def write_trial(stem: str | os.PathLike, trial: Trial) -> Path:
     table = np.hstack(cols)
     meta = copy.deepcopy(trial.meta)
     meta.setdefault("format", FORMAT)
-    csv_path, json_path = stem.with_suffix(".csv"), stem.with_suffix(".json")
+    csv_path, json_path = with_ending(stem, ".csv"), with_ending(stem, ".json")
     atomic_write(csv_path, lambda fh: fh.write(csvtable.to_text(header, table)))
     atomic_write(json_path, lambda fh: fh.write(json.dumps(meta, indent=2).encode()))
     return csv_path
@@ -197,10 +207,88 @@ def atomic_write(path: str | os.PathLike, write) -> None:
         raise
 
 
-def replace_dir(tmp: str | os.PathLike, out: str | os.PathLike) -> None:
+def trial_stem(path: str | os.PathLike) -> Path:
+    """The trial a path names: ``path`` without one ending of :data:`TRIAL_SUFFIXES`
+    (``S1.dof1.csv`` -> ``S1.dof1``, ``trial.csv.gz`` -> ``trial``, ``level_0.5`` ->
+    ``level_0.5``); other dots are part of the name."""
+    path = Path(path)
+    lower = path.name.lower()
+    for ending in TRIAL_SUFFIXES:
+        if lower.endswith(ending) and len(lower) > len(ending):
+            return path.with_name(path.name[:-len(ending)])
+    return path
+
+
+def with_ending(stem: str | os.PathLike, ending: str) -> Path:
+    """``stem`` with ``ending`` appended (never cut at a dot of the name, unlike
+    ``Path.with_suffix``)."""
+    stem = Path(stem)
+    return stem.with_name(stem.name + ending)
+
+
+def check_report_out(out: str | os.PathLike, inputs=()) -> None:
+    """Refuse a report folder ``out`` that would replace what this project did not write.
+
+    Refused: an existing file; a folder that is, or holds, one of ``inputs`` (files or
+    folders, compared after resolving links); a non-empty folder without the marker
+    :data:`REPORT_MARK` of an earlier report (or, for reports written before the marker,
+    their ``report.json`` / ``results.json`` index). A missing or empty folder, or an
+    earlier report, is accepted.
+
+    Raises
+    ------
+    trialformat.errors.OutputError
+        Naming ``out`` and the input or file at stake, and what would work.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out}: is an existing file; a report is a folder: give a "
+                          f"new folder name (e.g. {out.name}_report)")
+    target = out.resolve()
+    for source in inputs:
+        source = Path(source)
+        resolved = source.resolve()
+        if resolved == target or target in resolved.parents:
+            raise OutputError(f"--out {out}: is or holds the input {source}; a report "
+                              f"replaces its folder, so it must not hold the trials: give "
+                              f"a folder outside the inputs (e.g. {out.name}_report)")
+    if out.is_dir() and not (out / REPORT_MARK).is_file() and not _earlier_report(out) \
+            and any(out.iterdir()):
+        raise OutputError(f"--out {out}: folder is not empty and is not a report of this "
+                          f"project (no {REPORT_MARK}); it is left as it is: give a new or "
+                          f"empty folder")
+
+
+def _earlier_report(out: Path) -> bool:
+    """A report written before reports were marked: its own index file (``report.json`` of
+    the paper kind, ``results.json`` of the lab kind) with the keys this project writes."""
+    for name, keys in (("report.json", {"variant_in_figures", "rows", "summary"}),
+                       ("results.json", {"options", "results"})):
+        path = out / name
+        if path.is_file():
+            try:
+                doc = json.loads(path.read_text(encoding="utf-8"))
+            except (ValueError, UnicodeDecodeError, OSError):
+                continue
+            if isinstance(doc, dict) and keys <= set(doc):
+                return True
+    return False
+
+
+def replace_dir(tmp: str | os.PathLike, out: str | os.PathLike, kind: str = "report") -> None:
     """Put the finished folder ``tmp`` in place of ``out`` (a report written whole or not
-    at all): the old folder is moved aside first, then removed."""
+    at all): the old folder is moved aside first, then removed.
+
+    ``tmp`` gets the marker :data:`REPORT_MARK` (``kind`` recorded in it); ``out`` is
+    replaced only when it is missing, empty or marked (:func:`check_report_out`), so a
+    report never deletes a folder it did not write.
+    """
     tmp, out = Path(tmp), Path(out)
+    check_report_out(out)
+    mark = json.dumps({"format": REPORT_FORMAT, "kind": kind}).encode()
+    atomic_write(tmp / REPORT_MARK, lambda fh: fh.write(mark))
+    if out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
     if not out.exists():
         os.replace(tmp, out)
         return
@@ -220,8 +308,9 @@ def current_umask() -> int:
 
 def trial_exists(stem: str | os.PathLike) -> bool:
     """True when both files of a completely written trial are present."""
-    stem = Path(stem)
-    return stem.with_suffix(".json").is_file() and stem.with_suffix(".csv").is_file()
+    stem = trial_stem(stem)
+    return with_ending(stem, ".json").is_file() and (
+        with_ending(stem, ".csv").is_file() or with_ending(stem, ".csv.gz").is_file())
 
 
 # ----------------------------------------------------------------------------- reading
@@ -245,10 +334,9 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
     if Path(path).suffix.lower() == ".mat":
         from .matlab import read_trial_mat
         return read_trial_mat(path, min_samples=min_samples)
-    stem = Path(path)
-    if stem.suffix in (".csv", ".json"):
-        stem = stem.with_suffix("")
-    csv_path, json_path = stem.with_suffix(".csv"), stem.with_suffix(".json")
+    stem = trial_stem(path)
+    json_path = with_ending(stem, ".json")
+    csv_path = _data_file(Path(path), stem)
     if not (Path(path).exists() or csv_path.exists() or json_path.exists()):
         raise TrialFormatError(f"{path}: no such file or folder")
     meta, filled = _read_metadata(json_path)
@@ -257,6 +345,36 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
     header, delimiter = csvtable.read_header(csv_path)
     arrays = _columns(csv_path, header, delimiter, meta, filled)
     return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples)
+
+
+def _data_file(path: Path, stem: Path) -> Path:
+    """The CSV of a trial named by ``path``: the file itself, else ``stem.csv`` or
+    ``stem.csv.gz`` (both present: refused as ambiguous)."""
+    if path.name.lower().endswith((".csv", ".csv.gz")):
+        return path
+    plain, gz = with_ending(stem, ".csv"), with_ending(stem, ".csv.gz")
+    if plain.is_file() and gz.is_file():
+        raise TrialFormatError(f"{stem}: trial present both as {plain.name} and {gz.name}; "
+                               f"keep one or name the file")
+    return gz if gz.is_file() else plain
+
+
+def folder_trials(folder: str | os.PathLike) -> list[Path]:
+    """The trial files of a folder: ``NAME.csv``, ``NAME.csv.gz`` and ``NAME.mat``, sorted
+    per kind. A name present in two forms is refused as ambiguous; an empty list when the
+    folder holds none."""
+    folder = Path(folder)
+    found = {}
+    for pattern in ("*.csv", "*.csv.gz", "*.mat"):
+        for p in sorted(folder.glob(pattern)):
+            found.setdefault(trial_stem(p).name, []).append(p)
+    both = sorted(name for name, ps in found.items() if len(ps) > 1)
+    if both:
+        forms = "; ".join(f"{name} both as " + " and ".join(
+            p.name[len(name):] for p in found[name]) for name in both)
+        raise TrialFormatError(f"{folder}: trial(s) present in more than one form: {forms}; "
+                               f"keep one")
+    return [ps[0] for ps in found.values()]
 
 
 def finish_trial(meta: dict, arrays: dict, name: str, filled: list, where, *,
@@ -279,26 +397,29 @@ def finish_trial(meta: dict, arrays: dict, name: str, filled: list, where, *,
 def read_trials(source, *, min_samples: int = MIN_SAMPLES) -> list[Trial]:
     """Read every trial of a folder (``*.csv`` and ``*.mat``) or of a list of paths.
 
-    A stem present both as ``NAME.csv`` and ``NAME.mat`` is refused as ambiguous.
+    A stem present in two forms (``NAME.csv``, ``NAME.csv.gz``, ``NAME.mat``) is refused
+    as ambiguous. A ``.mat`` holding a struct array of trials gives one trial per element
+    (:func:`trialformat.matlab.read_trials_mat`).
     """
     if isinstance(source, (str, os.PathLike)) and Path(source).is_dir():
-        csv_paths = sorted(Path(source).glob("*.csv"))
-        mat_paths = sorted(Path(source).glob("*.mat"))
-        both = sorted({p.stem for p in csv_paths} & {p.stem for p in mat_paths})
-        if both:
-            raise TrialFormatError(f"{source}: trial(s) {both} present both as .csv and "
-                                   f".mat; keep one")
-        paths = csv_paths + mat_paths
+        paths = folder_trials(source)
         if not paths:
-            raise TrialFormatError(f"{source}: folder holds no trial (no NAME.csv or "
-                                   f"NAME.mat)")
+            raise TrialFormatError(f"{source}: folder holds no trial (no NAME.csv, "
+                                   f"NAME.csv.gz or NAME.mat)")
     elif isinstance(source, (str, os.PathLike)):
         paths = [Path(source)]
     else:
         paths = [Path(p) for p in source]
         if not paths:
             raise TrialFormatError("no trial given (empty list of paths)")
-    return [read_trial(p, min_samples=min_samples) for p in paths]
+    from .matlab import read_trials_mat
+    trials = []
+    for p in paths:
+        if Path(p).suffix.lower() == ".mat":
+            trials += read_trials_mat(p, min_samples=min_samples)
+        else:
+            trials.append(read_trial(p, min_samples=min_samples))
+    return trials
 
 
 def _read_metadata(json_path: Path) -> tuple[dict, list[str]]:
@@ -331,10 +452,15 @@ def complete_metadata(meta: dict, where) -> list[str]:
     """
     _integral(meta, "n_dof", where, default=2)
     n_dof = meta.get("n_dof", 2)
-    if n_dof < 1:
-        raise TrialFormatError(f"{where}: key 'n_dof' must be a positive integer, "
+    if not 1 <= n_dof <= MAX_DOF:
+        raise TrialFormatError(f"{where}: key 'n_dof' must be an integer in 1..{MAX_DOF}, "
                                f"got {n_dof!r}")
     defaults = default_metadata(n_dof)
+    for key, value in defaults.items():
+        if isinstance(value, dict) and key in meta and not isinstance(meta[key], dict):
+            raise TrialFormatError(f"{where}: key '{key}' must be a JSON object "
+                                   f"({{...}}), got {_json_type(meta[key])} "
+                                   f"{_short(meta[key])}")
     defaults["perturbed_dof"] = None
     if isinstance(meta.get("perturbation"), dict) and \
             meta["perturbation"].get("kind") == "position":
@@ -379,6 +505,26 @@ def complete_metadata(meta: dict, where) -> list[str]:
     return filled
 
 
+def _json_type(value) -> str:
+    """The JSON name of a value's type (null, boolean, number, string, array, object)."""
+    if value is None:
+        return "null"
+    for kind, name in ((bool, "boolean"), ((int, float), "number"), (str, "string"),
+                       (list, "array"), (dict, "object")):
+        if isinstance(value, kind):
+            return name
+    return type(value).__name__
+
+
+def _short(value, limit: int = 60) -> str:
+    """A value as JSON text cut to ``limit`` characters (for messages)."""
+    try:
+        text = json.dumps(value)
+    except (TypeError, ValueError):
+        text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 def _check_cutoff(meta: dict, where) -> None:
     """Refuse a ``perturbation.cutoff_hz`` that is not a positive number below fs/2 (it sets
     the default fit band)."""
@@ -419,7 +565,8 @@ def _columns(csv_path: Path, header: list[str], delimiter: str, meta: dict,
     missing = [c for c in required_columns(meta) if c not in present]
     if missing:
         raise TrialFormatError(f"{csv_path}: missing columns for {said}: "
-                               f"{', '.join(missing)} (header: {', '.join(header)})")
+                               f"{', '.join(missing)} (header: "
+                               f"{csvtable.printable(', '.join(header))[:500]})")
     known = {f"{s}[{j}]" for s in SIGNALS + ("theta_ref",) for j in range(1, n + 1)} | {"t"}
     wanted = [h for h in header if h in known]
     dup = sorted({h for h in wanted if wanted.count(h) > 1})

@@ -37,7 +37,9 @@ def write_trial_mat(path, trial: Trial, *, meta_as: str = "json", version: str =
     version : {"5", "4"}
         scipy.io's format; v4 holds no struct (use ``meta_as="json"``).
     """
-    path = Path(path).with_suffix(".mat")
+    path = Path(path)
+    if path.suffix.lower() != ".mat":
+        path = path.with_name(path.name + ".mat")
     data = {"t": trial.t[:, None]}
     data.update({s: trial.signal(s) for s in trial.signals()})
     if meta_as == "json":
@@ -53,6 +55,10 @@ def write_trial_mat(path, trial: Trial, *, meta_as: str = "json", version: str =
 def read_trial_mat(path, *, min_samples: int = MIN_SAMPLES) -> Trial:
     """Read one trial from ``NAME.mat`` (metadata inside, or in ``NAME.json`` beside).
 
+    The variables may be at the top level, or the fields of one struct (MATLAB users
+    save ``S.t``, ``S.theta``... so); a struct array of trials is read by
+    :func:`read_trials_mat` and refused here, naming the struct.
+
     Raises
     ------
     MatFileError
@@ -62,16 +68,79 @@ def read_trial_mat(path, *, min_samples: int = MIN_SAMPLES) -> Trial:
         The content breaks log-format.md (non-finite values, bad t, fs, perturbed_dof...).
     """
     path = Path(path)
-    data = _load(path)
-    meta = _metadata(path, data)
-    filled = complete_metadata(meta, path)
+    found = _trial_variables(path, _load(path))
+    if len(found) > 1:
+        raise MatFileError(f"{path}: struct array '{found[0][0].split('(')[0]}' holds "
+                           f"{len(found)} trials; read the file with read_trials (armimp "
+                           f"estimate and figures do) or save one trial per file")
+    label, data = found[0]
+    return _trial_from(path, label, data, path.stem, min_samples)
+
+
+def read_trials_mat(path, *, min_samples: int = MIN_SAMPLES) -> list[Trial]:
+    """Every trial of ``NAME.mat``: one (top-level variables or one struct), or one per
+    element of a struct array ``S`` (named ``NAME.S(i)``, 1-based as in MATLAB).
+
+    Raises as :func:`read_trial_mat`, naming the struct element.
+    """
+    path = Path(path)
+    found = _trial_variables(path, _load(path))
+    if len(found) == 1:
+        label, data = found[0]
+        return [_trial_from(path, label, data, path.stem, min_samples)]
+    return [_trial_from(path, label, data, f"{path.stem}.{label}", min_samples)
+            for label, data in found]
+
+
+def _trial_from(path, label, data, name, min_samples) -> Trial:
+    where = path if label is None else f"{path} struct '{label}'"
+    meta = _metadata(path, data, where)
+    filled = complete_metadata(meta, where)
     n = meta["n_dof"]
-    arrays = {"t": _vector(path, data, "t")}
+    arrays = {"t": _vector(where, data, "t")}
     position = (meta.get("perturbation") or {}).get("kind") == "position"
     for s in SIGNALS + ("theta_ref",):
         if s in data or not (s in OPTIONAL and (position or s == "theta_ref")):
-            arrays[s] = _matrix(path, data, s, arrays["t"].size, n)
-    return finish_trial(meta, arrays, path.stem, filled, path, min_samples=min_samples)
+            arrays[s] = _matrix(where, data, s, arrays["t"].size, n)
+    return finish_trial(meta, arrays, name, filled, where, min_samples=min_samples)
+
+
+def _trial_variables(path: Path, data: dict) -> list:
+    """``[(label, variables)]``: ``[(None, data)]`` for top-level variables, else the one
+    struct (``label`` its name) or the elements of the one struct array (``S(1)``...)
+    holding a field ``t``. Anything else is refused naming the variables found."""
+    user = {k: v for k, v in data.items() if not k.startswith("__")}
+    if "t" in user:
+        return [(None, user)]
+
+    def elements(value):
+        if isinstance(value, dict):
+            return [value]
+        if isinstance(value, (list, np.ndarray)) and len(value) and \
+                all(isinstance(v, dict) for v in value):
+            return list(value)
+        return []
+
+    structs = {k: elements(v) for k, v in user.items() if elements(v)}
+    holding = {k: v for k, v in structs.items() if all("t" in e for e in v)}
+    if len(holding) == 1:
+        name, items = next(iter(holding.items()))
+        if len(items) == 1:
+            return [(name, items[0])]
+        return [(f"{name}({i})", e) for i, e in enumerate(items, start=1)]
+    if len(holding) > 1:
+        raise MatFileError(f"{path}: structs {sorted(holding)} each hold a trial; save one "
+                           f"trial (or one struct array of trials) per file")
+    if structs:
+        descr = "; ".join(
+            f"struct{' array' if len(v) > 1 else ''} '{k}' with fields "
+            f"{', '.join(sorted(set().union(*(e.keys() for e in v))))}"
+            for k, v in structs.items())
+        raise MatFileError(f"{path}: no variable 't' at the top level, and no struct with "
+                           f"a field 't' ({descr}); a trial needs t, theta, tau_h (and "
+                           f"tau_delta, tau_m) as variables or as the fields of one struct")
+    raise MatFileError(f"{path}: variable 't' missing (variables: "
+                       f"{', '.join(sorted(user)) or 'none'})")
 
 
 def _load(path: Path) -> dict:
@@ -144,16 +213,18 @@ def _h5_cell(node, value, where):
     return arr.squeeze() if 1 in arr.shape and arr.ndim == 2 else arr
 
 
-def _metadata(path, data) -> dict:
+def _metadata(path, data, holder=None) -> dict:
     raw = data.get("meta")
+    holder = path if holder is None else holder
     if raw is None:
-        json_path = path.with_suffix(".json")
+        json_path = path.with_name(path.stem + ".json")
         if not json_path.is_file():
-            raise MatFileError(f"{path}: no variable 'meta' and no {json_path.name} beside it")
+            raise MatFileError(f"{holder}: no variable 'meta' and no {json_path.name} "
+                               f"beside the file")
         raw = json_path.read_text(encoding="utf-8-sig")
         where = json_path
     else:
-        where = f"{path} variable 'meta'"
+        where = f"{holder} variable 'meta'"
     if isinstance(raw, dict):
         return _from_struct(raw)
     if isinstance(raw, np.ndarray) and raw.dtype.kind == "U":

@@ -179,12 +179,13 @@ def test_failed_figures_leave_no_partial_report(ankle_folder, tmp_path, monkeypa
     with pytest.raises(RuntimeError, match="disk full"):
         main(["figures", str(ankle_folder), "--out", str(out)])
     assert not out.exists() and list(tmp_path.iterdir()) == []
-    out.mkdir()
+    out.mkdir()  # an earlier report of ours (marked), kept whole by a failed one
     (out / "old.txt").write_text("previous report")
+    (out / tf.logs.REPORT_MARK).write_text("{}")
     calls.clear()
     with pytest.raises(RuntimeError):
         main(["figures", str(ankle_folder), "--out", str(out)])
-    assert [p.name for p in out.iterdir()] == ["old.txt"]
+    assert sorted(p.name for p in out.iterdir()) == [tf.logs.REPORT_MARK, "old.txt"]
 
 
 def test_worked_example_ankle(tmp_path, capsys):

@@ -1,0 +1,105 @@
+"""Storage never decides a verdict, and the numerical retry goes down a ladder (issue 16)."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import trialformat as tf
+from diagnosis import simulate as dsim
+from diagnosis.conventions import check_time
+
+
+def _with_t(trial, stored):
+    return dataclasses.replace(trial, t_stored=stored)
+
+
+def test_float32_t_is_a_storage_note_not_a_mismatch(make_linear_trial):
+    trial = make_linear_trial(n_samples=40000)
+    exact = np.arange(trial.n_samples) / trial.fs
+    stored = exact.astype(np.float32).astype(float)
+    assert 1e-6 < np.max(np.abs(stored - exact)) < 2e-6  # the 1.9e-6 s of the issue
+    (finding,) = check_time([_with_t(trial, stored)])
+    assert finding.note and finding.name == "t rounded"
+    assert "float32" in finding.evidence and "within its storage precision" in finding.evidence
+
+
+def test_t_off_its_storage_precision_is_a_finding(make_linear_trial):
+    trial = make_linear_trial(n_samples=12000)
+    exact = np.arange(trial.n_samples) / trial.fs
+    stored = np.round(exact, 9)
+    stored[5000] += 4e-7  # a clock off by 0.4 us where the file prints 9 decimals
+    (finding,) = check_time([_with_t(trial, stored)])
+    assert not finding.note and finding.name == "t off the grid"
+    assert "at sample 5000" in finding.evidence
+
+
+def test_nothing_withheld_float32_t_gives_no_significant_gap_with_a_note(tmp_path):
+    pytest.importorskip("orchestrator")
+    from scipy import io as sio
+
+    from diagnosis import VERDICT_NONE, DiagnosisConfig, diagnose
+    from diagnosis.validation import SetSpec, make_set
+    folder = make_set(SetSpec("nominal", (), seeds=(41,), duration_s=9.0,
+                              resolution_level=1), tmp_path / "sets")
+    mats = tmp_path / "mats"
+    mats.mkdir()
+    for trial in tf.read_trials(folder, min_samples=0):
+        if trial.name.endswith(".truth"):
+            continue
+        data = {"t": trial.t.astype(np.float32)[:, None], "meta": json.dumps(trial.meta)}
+        data.update({s: trial.signal(s) for s in tf.SIGNALS})
+        sio.savemat(mats / f"{trial.name}.mat", data)
+    report = diagnose(mats, tmp_path / "report",
+                      config=DiagnosisConfig(effects=("gravity",), grid_points=3,
+                                             refine_iterations=0), progress=False, workers=1)
+    assert report.verdict == VERDICT_NONE, report.summary
+    notes = [c for c in report.conventions if c["note"]]
+    assert notes and all(c["name"] == "t rounded" for c in notes)
+    assert "mismatch" not in report.summary
+
+
+class FMUCallError(RuntimeError):
+    """Named as the orchestrator's: a plant that failed (a non-finite state)."""
+
+
+def test_numerical_retry_goes_down_the_ladder_until_a_run_is_finite(monkeypatch,
+                                                                    make_linear_trial):
+    trial = make_linear_trial(n_samples=200)
+    steps = []
+
+    def fake_simulate(setup, *, parameters=None, perturbation, **kw):
+        step = (parameters or {}).get("rk4_step", 1e-5)
+        steps.append(step)
+        if step > 1.5e-7:  # a LuGre sigma0 = 1e6 plant: diverges at 5e-7 s, runs at 1e-7 s
+            raise FMUCallError(f"fmi2DoStep: non-finite state at rk4_step {step}")
+        n = perturbation.shape[0]
+        return tf.Trial(meta={"n_dof": 2, "fs": 1000.0, "simulation": {}},
+                        t=np.arange(n) / 1000.0, tau_delta=perturbation,
+                        theta=np.zeros((n, 2)), tau_h=np.zeros((n, 2)), tau_m=np.zeros((n, 2)))
+
+    import orchestrator
+    monkeypatch.setattr(orchestrator, "simulate_trial", fake_simulate)
+    plant = type("P", (), {"parameters": {"rk4_step": 1e-5}})()
+    sim = dsim.simulate_like(trial, None, {}, 200, plant=plant)
+    assert sim is not None
+    np.testing.assert_allclose(steps, [1e-5, 5e-7, 1e-7])
+    retry = sim.meta["simulation"]["numerical_retry"]
+    assert retry["rk4_step"] == pytest.approx(1e-7)
+    np.testing.assert_allclose(retry["failed_rk4_steps"], [1e-5, 5e-7])
+
+
+def test_numerical_retry_gives_up_after_the_last_rung(monkeypatch, make_linear_trial):
+    trial = make_linear_trial(n_samples=200)
+    steps = []
+
+    def always_fails(setup, *, parameters=None, **kw):
+        steps.append((parameters or {}).get("rk4_step", 1e-5))
+        raise FMUCallError("non-finite state")
+
+    import orchestrator
+    monkeypatch.setattr(orchestrator, "simulate_trial", always_fails)
+    plant = type("P", (), {"parameters": {"rk4_step": 1e-5}})()
+    assert dsim.simulate_like(trial, None, {}, 200, plant=plant) is None
+    np.testing.assert_allclose(steps, [1e-5] + [1e-5 / f for f in dsim.NUMERICAL_RETRY_FACTORS])
