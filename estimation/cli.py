@@ -20,8 +20,9 @@ from trialformat import reference as ref
 
 from .conditions import PAPER, RECOMMENDED
 from .estimator import METHODS
-from .lab import UNITS, AnalysisOptions, analyse, element_indices, estimation_units
-from .labreport import write_lab_report
+from .lab import (UNITS, WEIGHTING_TEXT, AnalysisOptions, analyse, element_indices,
+                  estimation_units)
+from .labreport import symbol, write_lab_report
 from .report import make_report
 from .synthetic import ARM_3DOF
 
@@ -154,7 +155,8 @@ def describe(r) -> str:
              f"band {r.band_hz[0]:g}-{r.band_hz[1]:g} Hz ({r.band_source}), "
              f"{r.n_segments} segments; "
              f"sampling correction {'on' if c['left_limit_sampling'] else 'off'}, "
-             f"leakage correction {'on' if c['window_leakage'] else 'off'}"]
+             f"leakage correction {'on' if c['window_leakage'] else 'off'}",
+             f"  fit: {WEIGHTING_TEXT[r.weighting]} ({r.weighting})"]
     conf = int(round(100 * r.fit.confidence))
     for i, k in element_indices(r.n_dof):
         e = f"Z{i + 1}{k + 1}" if r.n_dof > 1 else "Z"
@@ -169,6 +171,14 @@ def describe(r) -> str:
                                               for p in "KBM") + "%"
         lines.append(text)
     lines.append(f"  (± : {conf} % confidence intervals)")
+    if r.sensitivity:
+        nv = len(r.sensitivity["variants"])
+        for i, k in element_indices(r.n_dof):
+            e = f"Z{i + 1}{k + 1}" if r.n_dof > 1 else "Z"
+            rng = r.sensitivity["range"]
+            lines.append(f"  {e} over {nv} band/weighting choices: " + "  ".join(
+                f"{symbol(p, r.n_dof)} {rng[p][0][i][k]:.4g}...{rng[p][1][i][k]:.4g}"
+                for p in "KBM"))
     lines += [f"  warning: {w}" for w in r.warnings]
     return "\n".join(lines)
 
