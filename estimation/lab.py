@@ -245,13 +245,20 @@ def runs(mask) -> list[tuple[int, int]]:
     return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
 
 
-def coherent_top(f, coherence, n_dof, threshold=COHERENT) -> float:
-    """Highest frequency [Hz] of a run of at least MIN_RUN_BINS bins where every
-    diagonal element's coherence reaches ``threshold`` (0 if none)."""
+#: The coherent range of the plots and FRF table ends with the last stretch of
+#: RANGE_BINS bins whose mean (smallest diagonal) coherence reaches RANGE_COHERENCE.
+RANGE_BINS, RANGE_COHERENCE = 21, 0.75
+
+
+def coherent_top(f, coherence, n_dof) -> float:
+    """Top [Hz] of the coherent range: the highest bin whose centred RANGE_BINS-bin mean
+    of the smallest diagonal coherence reaches RANGE_COHERENCE (0 if none). A running
+    mean, because past the perturbation's power a noise-dominated coherence still
+    reaches 0.5 by chance in short runs."""
     c = np.min(np.stack([coherence[:, i, i] for i in range(n_dof)]), axis=0)
-    good = [(a, b) for a, b in runs((c >= threshold) & (np.asarray(f) > 0))
-            if b - a >= MIN_RUN_BINS]
-    return float(f[good[-1][1] - 1]) if good else 0.0
+    mean = np.convolve(c, np.ones(RANGE_BINS) / RANGE_BINS, mode="same")
+    good = np.nonzero((mean >= RANGE_COHERENCE) & (np.asarray(f) > 0))[0]
+    return float(f[good[-1]]) if len(good) else 0.0
 
 
 def effective_averages(n_segments, welch) -> float:
@@ -436,9 +443,10 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
     tv = time_varying_warnings(result)
     sens = sensitivity_warnings(result)
     result.warnings += conv + tv + sens
-    result.flags = [w.split(":")[0] for w in result.warnings
-                    if w.startswith(("non-physical", "poor fit", "torque sign", "absolute",
-                                     "time-varying", "band-sensitive"))]
+    result.flags = list(dict.fromkeys(
+        w.split(":")[0].split(" Z")[0] for w in result.warnings
+        if w.startswith(("non-physical", "poor fit", "torque sign", "time-varying",
+                         "band-sensitive"))))
     result.warnings += band_suggestion(result, options)
     return result
 
@@ -517,9 +525,9 @@ def data_band(estimate, trials, options) -> dict | None:
     c = np.min(np.stack([estimate.coherence_Z[:, i, i] for i in range(n)]), axis=0)
     power = psd >= psd[1:].max() * 10 ** (-options.band_power_db / 10)
     power[0] = False
-    # the excited range: the contiguous stretch of power from the first excited bin
-    first = int(np.argmax(power))
-    stop = first + int(np.argmin(power[first:])) if not power[first:].all() else len(f)
+    # the excited range: the contiguous stretch of power around the PSD's peak
+    peak = 1 + int(np.argmax(psd[1:]))
+    first, stop = next((a, b) for a, b in runs(power) if a <= peak < b)
     ok = np.zeros(len(f), bool)
     ok[first:stop] = c[first:stop] >= options.band_coherence_min
     good = [(a, b) for a, b in runs(ok) if b - a >= MIN_RUN_BINS]
