@@ -38,12 +38,9 @@ import numpy as np
 from scipy import stats
 
 from .errors import EstimationError
+from .names import WEIGHTINGS
 from .estimator import BAND_HZ, band_mask
 
-#: Weightings of the second-order fit (module docstring): from the data, solved once
-#: (``coherence``, ``smoothed``, ``relative``, ``none``), or ``model``: ``1/|Zfit|`` of a
-#: first ``relative`` fit (two passes; the paper grid's fit, docs/estimation.md).
-WEIGHTINGS = ("coherence", "smoothed", "relative", "none", "model")
 
 #: Neighbours of a bin whose mean sets its data weight: 3 to 6 bins away on each side.
 WEIGHT_GAP, WEIGHT_REACH = 2, 6

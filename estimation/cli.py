@@ -15,16 +15,9 @@ import sys
 import warnings
 from pathlib import Path
 
-import trialformat as tf
-from trialformat import reference as ref
-
-from .conditions import PAPER, RECOMMENDED
-from .estimator import METHODS
-from .lab import (UNITS, WEIGHTING_TEXT, AnalysisOptions, analyse, element_indices,
-                  estimation_units)
-from .labreport import symbol, write_lab_report
-from .report import make_report
-from .synthetic import ARM_3DOF
+# Only names here: numpy, scipy, trialformat and the estimation modules load in the
+# handlers (``estimate`` never loads matplotlib), so that --help prints at once.
+from .names import METHODS, PAPER, RECOMMENDED, WEIGHTINGS
 
 TRUTHS = ("none", "table1", "reference-3dof")
 
@@ -36,12 +29,23 @@ def _analysis_arguments(p, truth_default="none") -> None:
                         "a recorded reference, closed_loop for all-joints trials, direct "
                         "(angle to torque) for position trials without a reference")
     g.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="fit band [Hz] (default 0 to the declared perturbation.cutoff_hz)")
+                   help="fit band [Hz] (default: 0 to the declared perturbation.cutoff_hz, "
+                        "else from the data: where the perturbation has power and the "
+                        "coherence is >= 0.9)")
     g.add_argument("--nperseg", type=int, default=8192, help="Welch segment [samples]")
     g.add_argument("--noverlap", type=int, help="Welch overlap [samples] (default 3/4 "
                                                  "of the segment)")
     g.add_argument("--nfft", type=int, help="FFT length [samples] (default: the segment)")
     g.add_argument("--window", default="hann", help="Welch window (scipy.signal name)")
+    g.add_argument("--weighting", choices=WEIGHTINGS, default="smoothed",
+                   help="bin weights of the M, B, K fit, from the data, solved once: "
+                        "smoothed (1/|Z| of the neighbouring bins, relative error; "
+                        "default), coherence (1/std from the coherence, Bendat & Piersol), "
+                        "relative (1/|Zhat| of the bin), none; model: 1/|Zfit| of a first "
+                        "fit (two passes)")
+    g.add_argument("--segments", type=int, default=4,
+                   help="time segments of each recording fitted apart to detect a "
+                        "time-varying impedance (0: no check; default 4)")
     g.add_argument("--sampling-correction", choices=("auto", "on", "off"), default="auto",
                    help="half-sample delay of the inertial term for left-limit torque "
                         "sampling; auto: only for trials declaring sensors.torque_sampling "
@@ -88,18 +92,21 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_figures)
 
 
-def options_from(args) -> AnalysisOptions:
+def options_from(args):
+    from .lab import AnalysisOptions
     options = AnalysisOptions(
         method=args.method, band_hz=tuple(args.band) if args.band else None,
         nperseg=args.nperseg, noverlap=args.noverlap, nfft=args.nfft, window=args.window,
         sampling_correction="off" if args.raw else args.sampling_correction,
-        leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool)
+        leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool,
+        weighting=args.weighting, segments=args.segments)
     options.check()
     return options
 
 
 def _truth(name, n):
     if name == "table1":
+        from trialformat import reference as ref
         if n != 2:
             raise ValueError(f"--truth table1 is a 2-joint arm; these trials have {n} joints")
         return ref.arm_matrices()
@@ -107,6 +114,7 @@ def _truth(name, n):
         if n != 3:
             raise ValueError(f"--truth reference-3dof is a 3-joint arm; these trials have "
                              f"{n} joints")
+        from .synthetic import ARM_3DOF
         return ARM_3DOF
     return None
 
@@ -114,6 +122,7 @@ def _truth(name, n):
 def _read(sources, options):
     """Read the trials; the readers' warnings (keys filled from the reference, an unknown
     format) go to stderr as one plain line each, not as Python warnings with source lines."""
+    import trialformat as tf
     sources = [Path(s) for s in sources]
     trials = []
     with warnings.catch_warnings(record=True) as caught:
@@ -126,6 +135,7 @@ def _read(sources, options):
 
 
 def lab_results(trials, options, truth_name="none"):
+    from .lab import analyse, estimation_units
     results = []
     for unit in estimation_units(trials, pool=options.pool):
         truth = _truth(truth_name, unit.trials[0].n_dof)
@@ -144,12 +154,14 @@ def run_estimate(args) -> int:
                 "compensated": r.corrections["left_limit_sampling"],
                 "leakage_removed": r.corrections["window_leakage"]} for r in results]
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        tf.atomic_write(args.json, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
+        from trialformat import atomic_write
+        atomic_write(args.json, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
     return 0 if results else 1
 
 
 def describe(r) -> str:
     """Text of one result: set-up line, one line per element, the warnings."""
+    from .lab import UNITS, WEIGHTING_TEXT, element_indices, symbol_of as symbol
     c = r.corrections
     lines = [f"{r.label}: method={r.method}, trials={', '.join(r.trials)} ({r.reason}); "
              f"band {r.band_hz[0]:g}-{r.band_hz[1]:g} Hz ({r.band_source}), "
@@ -200,11 +212,13 @@ def run_figures(args) -> int:
             n = max(t.n_dof for t in trials)
             truth = {2: "table1", 3: "reference-3dof"}.get(n, "none")
         compare = None if args.compare.lower() == "none" else args.compare
+        from .report import make_report
         result = make_report(args.folders, args.out, truth=truth, variant=args.fig_variant,
                              compare=compare)
         files = result["files"]
     else:
         truth = "none" if args.truth == "auto" else args.truth
+        from .labreport import write_lab_report
         results = lab_results(trials, options, truth)
         files = write_lab_report(results, args.out, options={
             **options.__dict__, "truth": truth})
