@@ -741,7 +741,8 @@ def time_varying_warnings(result) -> list[str]:
                                   f"{s[p][i][i]:.4g}+-{s[f'{p}_ci'][i][i]:.2g}" for s in segs)
                 out.append(f"time-varying: {symbol_of(p, n)}{_e(i, i, n)} differs between "
                            f"time segments beyond their intervals ({parts} {UNITS[p]}; "
-                           f"chi-square p = {pval:.1g}): the single value "
+                           f"chi-square p {'< 1e-16' if pval < 1e-16 else f'= {pval:.1g}'}"
+                           f"): the single value "
                            f"{getattr(result.fit, p)[i, i]:.4g} is an average over a "
                            f"changing impedance, not one joint state")
     return out
@@ -809,12 +810,13 @@ def _good_fit(fit, options, n) -> bool:
 
 
 def band_suggestion(result, options) -> list[str]:
-    """When the fit is flagged, a band that works: the data band or a neighbouring band
-    (:func:`sensitivity`) whose fit is physical, well determined and R^2 >= r2_min."""
+    """When the fit is non-physical, poor, poorly determined or of low coherence, a band
+    that works: the data band or a neighbouring band (:func:`sensitivity`) whose fit is
+    physical, well determined and R^2 >= r2_min."""
     flagged = [w for w in result.warnings
-               if w.startswith(("non-physical", "poor fit", "low coherence", "band-sensitive"))
+               if w.startswith(("non-physical", "poor fit", "low coherence"))
                or "poorly determined" in w]
-    if not flagged:
+    if not flagged:  # band-sensitive alone: another band would not mend the model
         return []
     n = result.n_dof
     cands = []
