@@ -898,8 +898,14 @@ def result_rows(results) -> list[dict]:
             for p in "MBK":
                 row[f"{p} [{UNITS[p]}]"] = float(getattr(r.fit, p)[i, k])
                 row[f"{p}_ci [{UNITS[p]}]"] = float(getattr(r.fit, f"{p}_ci")[i, k])
+            if r.sensitivity:
+                for p in "MBK":
+                    row[f"{p}_range_min [{UNITS[p]}]"] = r.sensitivity["range"][p][0][i][k]
+                    row[f"{p}_range_max [{UNITS[p]}]"] = r.sensitivity["range"][p][1][i][k]
             row.update({"R2": float(r.fit.r2[i, k]), "VAF [%]": float(r.vaf[i, k]),
-                        "coherence": float(r.coherence_band[i, k])})
+                        "coherence": float(r.coherence_band[i, k]),
+                        "band_lo [Hz]": float(r.band_hz[0]), "band_hi [Hz]": float(r.band_hz[1]),
+                        "weighting": r.weighting})
             if r.errors_pct is not None:
                 row.update({f"err_{p} [%]": float(r.errors_pct[p][i, k]) for p in "MBK"})
             rows.append(row)

@@ -37,8 +37,8 @@ import numpy as np  # noqa: E402
 from trialformat import atomic_write  # noqa: E402
 from trialformat.logs import current_umask, replace_dir  # noqa: E402
 
-from .lab import (COHERENT, FRF_UNITS, MIN_RUN_BINS, UNITS, effective_averages,  # noqa: E402
-                  element_indices, frf_confidence, result_rows, runs)
+from .lab import (COHERENT, FRF_UNITS, MIN_RUN_BINS, UNITS, WEIGHTING_TEXT,  # noqa: E402
+                  effective_averages, element_indices, frf_confidence, result_rows, runs)
 
 
 def safe_name(label: str) -> str:
@@ -111,10 +111,11 @@ def parameters_markdown(results) -> str:
     lines = []
     for r in results:
         lines.append(f"### {r.label} ({r.method}, {', '.join(r.trials)})\n")
-        lines.append(f"band {r.band_hz[0]:g}-{r.band_hz[1]:g} Hz, {r.n_segments} segments "
-                     f"of {r.welch['nperseg']}, corrections: "
+        lines.append(f"band {r.band_hz[0]:.4g}-{r.band_hz[1]:.4g} Hz ({r.band_source}), "
+                     f"{r.n_segments} segments of {r.welch['nperseg']}, corrections: "
                      f"sampling {'on' if r.corrections['left_limit_sampling'] else 'off'}, "
-                     f"leakage {'on' if r.corrections['window_leakage'] else 'off'}\n")
+                     f"leakage {'on' if r.corrections['window_leakage'] else 'off'}; fit: "
+                     f"{WEIGHTING_TEXT[r.weighting]} ({r.weighting})\n")
         head = (["element"] + [f"{symbol(p, r.n_dof)} [{UNITS[p]}]" for p in "MBK"]
                 + ["R^2", "VAF [%]", "coherence"])
         lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -127,6 +128,14 @@ def parameters_markdown(results) -> str:
             cells += [f"{r.fit.r2[i, k]:.4f}", f"{r.vaf[i, k]:.2f}",
                       f"{r.coherence_band[i, k]:.3f}"]
             lines.append("| " + " | ".join(cells) + " |")
+        if r.sensitivity:
+            nv = len(r.sensitivity["variants"])
+            for i, k in element_indices(r.n_dof):
+                rng = r.sensitivity["range"]
+                lines.append(f"| range over {nv} band/weighting choices "
+                             + ("" if r.n_dof == 1 else f"Z{i + 1}{k + 1} ") + "| "
+                             + " | ".join(f"{rng[p][0][i][k]:.5g} ... {rng[p][1][i][k]:.5g}"
+                                          for p in "MBK") + " | | | |")
         lines.append(f"\n± : {conf} % confidence interval half-widths. "
                      + ("1 joint: I is the inertia (column M in parameters.csv and "
                         "results.json).\n" if r.n_dof == 1 else "\n"))
