@@ -8,15 +8,49 @@ Public API::
     from diagnosis.validation import SetSpec, make_set, draw_specs, run_validation
 """
 
-from .catalogue import CATALOGUE, catalogue_table, expand_effect, get_effect
-from .core import (VERDICT_CONVENTION, VERDICT_EFFECT, VERDICT_NONE, VERDICT_PARTLY, VERDICT_UNEXPLAINED, DiagnosisConfig,
-                   DiagnosisReport, diagnose, split_units)
-from .errors import DiagnosisInputError, DiagnosisSimulationError
-from .features import FeatureConfig, FeatureVector, grid_step, trial_features
-from .gap import GapResult, make_normaliser, set_gap, z_scores
+_EXPORTS = {
+    'CATALOGUE': '.catalogue',
+    'catalogue_table': '.catalogue',
+    'expand_effect': '.catalogue',
+    'get_effect': '.catalogue',
+    'VERDICT_CONVENTION': '.core',
+    'VERDICT_EFFECT': '.core',
+    'VERDICT_NONE': '.core',
+    'VERDICT_PARTLY': '.core',
+    'VERDICT_UNEXPLAINED': '.core',
+    'DiagnosisConfig': '.core',
+    'DiagnosisReport': '.core',
+    'diagnose': '.core',
+    'split_units': '.core',
+    'DiagnosisInputError': '.errors',
+    'DiagnosisSimulationError': '.errors',
+    'FeatureConfig': '.features',
+    'FeatureVector': '.features',
+    'grid_step': '.features',
+    'trial_features': '.features',
+    'GapResult': '.gap',
+    'make_normaliser': '.gap',
+    'set_gap': '.gap',
+    'z_scores': '.gap',
+}
 
 __all__ = ["CATALOGUE", "catalogue_table", "expand_effect", "get_effect", "VERDICT_EFFECT",
            "VERDICT_CONVENTION", "VERDICT_NONE", "VERDICT_PARTLY", "VERDICT_UNEXPLAINED", "DiagnosisConfig", "DiagnosisReport",
            "diagnose", "split_units", "DiagnosisInputError", "DiagnosisSimulationError",
            "FeatureConfig", "FeatureVector", "grid_step", "trial_features", "GapResult",
            "make_normaliser", "set_gap", "z_scores"]
+
+
+def __getattr__(name):
+    """Load the submodule of a public name on first use (PEP 562), so that importing the
+    package (``python -m diagnosis``, the CLI's --help) loads no numpy, scipy or FMU code."""
+    if name in _EXPORTS:
+        from importlib import import_module
+        value = getattr(import_module(_EXPORTS[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -11,8 +11,6 @@ from pathlib import Path
 
 from trialformat.cliargs import MAX_SAMPLES, number
 
-from . import catalogue as cat
-
 
 def register(subparsers) -> None:
     """Add this package's subcommands to the orchestrator's argparse subparsers."""
@@ -21,8 +19,8 @@ def register(subparsers) -> None:
     p.add_argument("folder", help="folder of trials (NAME.csv + NAME.json)")
     p.add_argument("--out", required=True, help="report folder")
     p.add_argument("--effects", default=None,
-                   help=f"comma-separated effects to try (default: all of "
-                        f"{','.join(cat.CATALOGUE)})")
+                   help="comma-separated effects to try (default: all of the catalogue, "
+                        "docs/diagnosis.md)")
     p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
     p.add_argument("--workers", type=int, default=None,
                    help="local processes for the simulations (default: one per core)")
@@ -54,6 +52,7 @@ def register(subparsers) -> None:
 
 
 def _effects(text):
+    from . import catalogue as cat  # numpy: loaded by the handler, not by --help
     if not text:
         return tuple(cat.CATALOGUE)
     names = tuple(n.strip() for n in text.split(",") if n.strip())

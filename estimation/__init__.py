@@ -4,17 +4,40 @@ Stands alone: imports only trialformat, numpy, scipy, pandas and matplotlib (nev
 orchestrator). Any number of joints. See docs/estimation.md.
 """
 
-from .accuracy import (SecondOrderFit, corrected_impedance, fit_impedance, fit_second_order,
-                       left_limit_delay, true_impedance, vaf)
-from .conditions import (PAPER, RECOMMENDED, VARIANTS, Condition, condition_of, evaluate,
-                         group_conditions, variant_impedance)
-from .errors import EstimationError, MatFileError
-from .estimator import (METHODS, ImpedanceEstimate, band_mask, default_method,
-                        estimate_impedance, perturbation_of)
-from .io import read_trial, read_trials
-from .matlab import read_trial_mat, write_trial_mat
-from .spectral import (auto_spectrum, coherence, cross_spectrum, frequency_response,
-                       ordinary_coherence)
+_EXPORTS = {
+    'SecondOrderFit': '.accuracy',
+    'corrected_impedance': '.accuracy',
+    'fit_impedance': '.accuracy',
+    'fit_second_order': '.accuracy',
+    'left_limit_delay': '.accuracy',
+    'true_impedance': '.accuracy',
+    'vaf': '.accuracy',
+    'PAPER': '.conditions',
+    'RECOMMENDED': '.conditions',
+    'VARIANTS': '.conditions',
+    'Condition': '.conditions',
+    'condition_of': '.conditions',
+    'evaluate': '.conditions',
+    'group_conditions': '.conditions',
+    'variant_impedance': '.conditions',
+    'EstimationError': '.errors',
+    'MatFileError': '.errors',
+    'METHODS': '.estimator',
+    'ImpedanceEstimate': '.estimator',
+    'band_mask': '.estimator',
+    'default_method': '.estimator',
+    'estimate_impedance': '.estimator',
+    'perturbation_of': '.estimator',
+    'read_trial': '.io',
+    'read_trials': '.io',
+    'read_trial_mat': '.matlab',
+    'write_trial_mat': '.matlab',
+    'auto_spectrum': '.spectral',
+    'coherence': '.spectral',
+    'cross_spectrum': '.spectral',
+    'frequency_response': '.spectral',
+    'ordinary_coherence': '.spectral',
+}
 
 __all__ = ["SecondOrderFit", "corrected_impedance", "fit_impedance", "fit_second_order", "left_limit_delay", "true_impedance", "vaf",
            "Condition", "condition_of", "evaluate", "group_conditions", "variant_impedance",
@@ -23,3 +46,18 @@ __all__ = ["SecondOrderFit", "corrected_impedance", "fit_impedance", "fit_second
            "default_method", "perturbation_of",
            "read_trial", "read_trials", "read_trial_mat", "write_trial_mat", "auto_spectrum",
            "coherence", "cross_spectrum", "frequency_response", "ordinary_coherence"]
+
+
+def __getattr__(name):
+    """Load the submodule of a public name on first use (PEP 562), so that importing the
+    package (``python -m estimation``, the CLI's --help) loads no numpy, scipy or FMU code."""
+    if name in _EXPORTS:
+        from importlib import import_module
+        value = getattr(import_module(_EXPORTS[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -2,11 +2,21 @@
 
 - ``vaf``: VAF = 100 (1 - sum |Zhat - Z|^2 / sum |Z|^2) over the band, complex FRF [%].
 - ``fit_second_order``: ``Zhat ~ K - M w^2 + j B w`` by linear least squares on the real and
-  imaginary parts, each bin weighted by ``1/|Zhat|`` (relative error). R^2 is the fit's
-  VAF with the same weights, against zero (so it reads 1 for a perfect fit of any
+  imaginary parts, each bin weighted (``WEIGHTINGS``, :func:`data_weights`). R^2 is the
+  fit's VAF with the same weights, against zero (so it reads 1 for a perfect fit of any
   impedance shape, a pure spring included):
 
-      R^2 = 1 - sum w^2 |Zhat - Zfit|^2 / sum w^2 |Zhat|^2,  w = 1/|Zhat|.
+      R^2 = 1 - sum w^2 |Zhat - Zfit|^2 / sum w^2 |Zhat|^2.
+
+- Weightings taken from the data only, solved once (one answer, global in the band: the
+  weighted LS problem is linear in M, B, K): ``coherence`` weights each bin by the inverse
+  of the standard deviation of ``Zhat`` that its coherence predicts (Bendat & Piersol,
+  Random Data, 4th ed., eq. 9.52: ``std|H| / |H| ~ sqrt(1 - g^2) / (|g| sqrt(2 nd))``),
+  ``w = |g| / (|Z| sqrt(1 - g^2))``; ``smoothed`` by ``1/|Z|`` (relative error). In both,
+  ``|Z|`` and ``g^2`` of a bin are the means over its neighbours 3 to 6 bins away (log
+  |Zhat|, g^2), never the bin itself or the two next to it, whose errors correlate with
+  its own under a Hann window: weights from the bin itself favour bins where the noise
+  shrank |Zhat| (``relative``, ``1/|Zhat|``: -0.7 % on K at coherence 0.9).
 
 - Confidence intervals: the weighted LS estimate with a heteroscedasticity- and
   autocorrelation-consistent (HAC) covariance over frequency, because Welch's Hann window
@@ -28,7 +38,58 @@ import numpy as np
 from scipy import stats
 
 from .errors import EstimationError
+from .names import WEIGHTINGS
 from .estimator import BAND_HZ, band_mask
+
+
+#: Neighbours of a bin whose mean sets its data weight: 3 to 6 bins away on each side.
+WEIGHT_GAP, WEIGHT_REACH = 2, 6
+
+
+def neighbour_mean(x, gap=WEIGHT_GAP, reach=WEIGHT_REACH) -> np.ndarray:
+    """Mean of ``x[j]`` over ``gap < |j - k| <= reach`` for every k (axis 0).
+
+    Bins near the ends use the neighbours they have; with none (fewer than ``gap + 2``
+    bins) the mean over all bins. Shape of ``x``.
+    """
+    x = np.asarray(x, dtype=float)
+    nb = x.shape[0]
+    c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])
+    k = np.arange(nb)
+    total = np.zeros_like(x)
+    count = np.zeros(nb)
+    for lo, hi in ((k - reach, k - gap - 1), (k + gap + 1, k + reach)):
+        lo_c, hi_c = np.clip(lo, 0, nb), np.clip(hi + 1, 0, nb)
+        ok = hi_c > lo_c
+        total[ok] += c[hi_c[ok]] - c[lo_c[ok]]
+        count += np.where(ok, hi_c - lo_c, 0)
+    shape = (-1,) + (1,) * (x.ndim - 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = total / count.reshape(shape)
+    return np.where(count.reshape(shape) > 0, out, x.mean(axis=0))
+
+
+def data_weights(z, weighting, coherence=None) -> np.ndarray:
+    """Bin weights of a fit from the data alone (module docstring), shape of ``z`` (nb,).
+
+    ``coherence`` [-] (nb,) is needed for ``weighting="coherence"`` (clipped to
+    1e-3..0.999 after the neighbour mean).
+    """
+    z = np.asarray(z)
+    if weighting == "none":
+        return np.ones(z.shape)
+    if weighting == "relative":
+        return 1.0 / np.abs(z)
+    mag = np.exp(neighbour_mean(np.log(np.abs(z))))
+    if weighting == "smoothed":
+        return 1.0 / mag
+    if weighting == "coherence":
+        if coherence is None:
+            raise EstimationError("weighting='coherence' needs the coherence of the estimate")
+        g2 = np.clip(neighbour_mean(coherence), 1e-3, 0.999)
+        return np.sqrt(g2 / (1.0 - g2)) / mag
+    raise EstimationError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
+
 
 #: Default HAC bandwidth [bins] for nfft == nperseg (Hann: errors of bins 1-2 apart
 #: correlate, and the wider the more zero padding).
@@ -116,7 +177,7 @@ class SecondOrderFit:
 
 
 def fit_second_order(f, Z, *, band_hz=BAND_HZ, inertia_delay_s=0.0, weighting="model",
-                     confidence=0.95, hac_bins=HAC_BINS) -> SecondOrderFit:
+                     confidence=0.95, hac_bins=HAC_BINS, coherence=None) -> SecondOrderFit:
     """Fit ``K - M w^2 exp(-j w tau) + j B w`` to each element of Z over the band.
 
     Parameters
@@ -131,12 +192,16 @@ def fit_second_order(f, Z, *, band_hz=BAND_HZ, inertia_delay_s=0.0, weighting="m
         ``model`` (default) weights each bin by ``1/|Zfit|`` of a first ``relative`` pass:
         relative error without the bias that weights taken from the noisy estimate itself
         (``relative``: ``1/|Zhat|``) give, which favour bins where noise shrank |Zhat|
-        (about -0.7 % on K at coherence 0.9, docs/estimation.md); ``none`` for comparison.
+        (about -0.7 % on K at coherence 0.9, docs/estimation.md); ``none`` for comparison;
+        ``coherence`` and ``smoothed``: from the data alone, solved once
+        (:func:`data_weights`).
     confidence : float, keyword-only
         Level of the confidence intervals.
     hac_bins : int, keyword-only
         Bins over which estimation errors are taken as correlated (module docstring);
         0 for independent bins.
+    coherence : array_like [-], shape of Z, keyword-only
+        Coherence of each element (for ``weighting="coherence"``).
 
     Returns
     -------
@@ -145,9 +210,10 @@ def fit_second_order(f, Z, *, band_hz=BAND_HZ, inertia_delay_s=0.0, weighting="m
     f, Z = np.asarray(f, dtype=float), np.asarray(Z)
     if Z.shape[0] != f.shape[0]:
         raise EstimationError(f"Z has {Z.shape[0]} frequencies but f has {f.shape[0]}")
-    if weighting not in ("model", "relative", "none"):
-        raise EstimationError(f"weighting must be 'model', 'relative' or 'none', got "
-                              f"{weighting!r}")
+    if weighting not in WEIGHTINGS:
+        raise EstimationError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
+    if weighting == "coherence" and coherence is None:
+        raise EstimationError("weighting='coherence' needs the coherence of the estimate")
     mask = band_mask(f, band_hz)
     if mask.sum() < 3:
         raise EstimationError(f"band {band_hz} Hz holds {mask.sum()} bins, fewer than 3")
@@ -156,20 +222,22 @@ def fit_second_order(f, Z, *, band_hz=BAND_HZ, inertia_delay_s=0.0, weighting="m
     # Columns: M, B, K regressors (complex), split into real and imaginary rows below.
     basis = np.stack([-w ** 2 * np.exp(-1j * w * inertia_delay_s), 1j * w,
                       np.ones_like(w)], axis=1)
-    out = [_fit_one(basis, Zb[:, e], weighting, confidence, hac_bins)
-           for e in range(Zb.shape[1])]
+    Cb = (np.asarray(coherence)[mask].reshape(mask.sum(), -1) if coherence is not None
+          else [None] * Zb.shape[1])
+    out = [_fit_one(basis, Zb[:, e], weighting, confidence, hac_bins,
+                    None if coherence is None else Cb[:, e]) for e in range(Zb.shape[1])]
     shape = Z.shape[1:]
     fields = {name: np.array([o[i] for o in out]).reshape(shape)
               for i, name in enumerate(("M", "B", "K", "M_ci", "B_ci", "K_ci", "r2"))}
     return SecondOrderFit(confidence=confidence, inertia_delay_s=inertia_delay_s, **fields)
 
 
-def _fit_one(basis, z, weighting, confidence, hac_bins):
+def _fit_one(basis, z, weighting, confidence, hac_bins, coherence=None):
     if weighting == "model":
         first = _fit_one(basis, z, "relative", confidence, 0)
         wt = 1.0 / np.abs(basis @ np.asarray(first[:3]))
     else:
-        wt = 1.0 / np.abs(z) if weighting == "relative" else np.ones(z.shape)
+        wt = data_weights(z, weighting, coherence)
     Ac = basis * wt[:, None]
     A = np.vstack([Ac.real, Ac.imag])
     y = np.concatenate([(z * wt).real, (z * wt).imag])
@@ -220,7 +288,8 @@ def fit_impedance(estimate, *, inertia_delay_s=0.0, leakage=True, weighting="mod
     L terms are what the window's edges leak. ``leakage=False`` drops them, and the fit is
     then :func:`fit_second_order` element by element. Each row i of (M, B, K) is one
     linear least-squares problem over the n columns k, bins weighted by ``1/|Z_ik|`` of a
-    first fit (``weighting="model"``, see :func:`fit_second_order`); R^2 and confidence
+    first fit (``weighting="model"``, see :func:`fit_second_order`) or from the data
+    (``coherence``, ``smoothed``: :func:`data_weights`, solved once); R^2 and confidence
     intervals as in :func:`fit_second_order`, per element.
 
     Parameters
@@ -232,15 +301,15 @@ def fit_impedance(estimate, *, inertia_delay_s=0.0, leakage=True, weighting="mod
         Model (and so remove) the window leakage. Needs ``estimate.P1``, ``estimate.P2``
         (not available for the ``direct`` method).
     """
-    if weighting not in ("relative", "model", "none"):
-        raise EstimationError(f"weighting must be 'model', 'relative' or 'none', got "
-                              f"{weighting!r}")
+    if weighting not in WEIGHTINGS:
+        raise EstimationError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
     if hac_bins is None:
         hac_bins = HAC_BINS * max(1, round(getattr(estimate, "nfft_over_nperseg", 1)))
     if not leakage:
         return fit_second_order(estimate.f, estimate.Z, band_hz=estimate.band_hz,
                                 inertia_delay_s=inertia_delay_s, weighting=weighting,
-                                confidence=confidence, hac_bins=hac_bins)
+                                confidence=confidence, hac_bins=hac_bins,
+                                coherence=estimate.coherence_Z)
     if not np.all(np.isfinite(estimate.P1)):
         raise EstimationError(f"method {estimate.method!r} gives no window-leakage responses;"
                               f" use leakage=False")
@@ -249,10 +318,12 @@ def fit_impedance(estimate, *, inertia_delay_s=0.0, leakage=True, weighting="mod
     n = estimate.n_dof
     out = {k: np.zeros((n, n)) for k in ("M", "B", "K", "M_ci", "B_ci", "K_ci", "r2")}
     for i in range(n):
-        if weighting == "none":
-            wts = np.ones((n, len(Z)))
-        else:
+        if weighting == "model":
             wts = 1.0 / np.abs(Z[:, i, :].T)
+        else:
+            C = estimate.coherence_Z[b]
+            wts = np.array([data_weights(Z[:, i, k], weighting, C[:, i, k])
+                            for k in range(n)])
         theta, half, r2 = _solve_row(Z[:, i, :], (AM, AB, AK), wts, confidence, hac_bins)
         if weighting == "model":  # second pass: weights of the first fit, not of the noise
             zfit = sum(np.einsum("fjk,j->fk", A, theta[p * n:(p + 1) * n])

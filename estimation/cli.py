@@ -16,17 +16,11 @@ import warnings
 from pathlib import Path
 
 import trialformat as tf
-from trialformat import reference as ref
-
 from trialformat.cliargs import MAX_FFT, number
 
-from .conditions import PAPER, RECOMMENDED
-from .errors import EstimationError
-from .estimator import METHODS
-from .lab import UNITS, AnalysisOptions, analyse, element_indices, estimation_units
-from .labreport import write_lab_report
-from .report import make_report
-from .synthetic import ARM_3DOF
+# Only names here: numpy, scipy and the estimation modules load in the handlers
+# (``estimate`` never loads matplotlib), so that --help prints at once.
+from .names import METHODS, PAPER, RECOMMENDED, WEIGHTINGS
 
 TRUTHS = ("none", "table1", "reference-3dof")
 
@@ -39,7 +33,9 @@ def _analysis_arguments(p, truth_default="none") -> None:
                         "(angle to torque) for position trials without a reference")
     g.add_argument("--band", nargs=2, type=number("--band", 0, 1e6, "0 15", lo_open=False),
                    metavar=("LO", "HI"),
-                   help="fit band [Hz] (default 0 to the declared perturbation.cutoff_hz)")
+                   help="fit band [Hz] (default: 0 to the declared perturbation.cutoff_hz, "
+                        "else from the data: where the perturbation has power and the "
+                        "coherence is >= 0.9)")
     g.add_argument("--nperseg", type=number("--nperseg", 2, MAX_FFT, 8192, integer=True,
                                             lo_open=False),
                    default=8192, help="Welch segment [samples]")
@@ -49,6 +45,15 @@ def _analysis_arguments(p, truth_default="none") -> None:
     g.add_argument("--nfft", type=number("--nfft", 2, MAX_FFT, 8192, integer=True,
                                          lo_open=False), help="FFT length [samples] (default: the segment)")
     g.add_argument("--window", default="hann", help="Welch window (scipy.signal name)")
+    g.add_argument("--weighting", choices=WEIGHTINGS, default="smoothed",
+                   help="bin weights of the M, B, K fit, from the data, solved once: "
+                        "smoothed (1/|Z| of the neighbouring bins, relative error; "
+                        "default), coherence (1/std from the coherence, Bendat & Piersol), "
+                        "relative (1/|Zhat| of the bin), none; model: 1/|Zfit| of a first "
+                        "fit (two passes)")
+    g.add_argument("--segments", type=int, default=4,
+                   help="time segments of each recording fitted apart to detect a "
+                        "time-varying impedance (0: no check; default 4)")
     g.add_argument("--sampling-correction", choices=("auto", "on", "off"), default="auto",
                    help="half-sample delay of the inertial term for left-limit torque "
                         "sampling; auto: only for trials declaring sensors.torque_sampling "
@@ -95,25 +100,29 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_figures)
 
 
-def options_from(args) -> AnalysisOptions:
+def options_from(args):
+    from .lab import AnalysisOptions
     options = AnalysisOptions(
         method=args.method, band_hz=tuple(args.band) if args.band else None,
         nperseg=args.nperseg, noverlap=args.noverlap, nfft=args.nfft, window=args.window,
         sampling_correction="off" if args.raw else args.sampling_correction,
-        leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool)
+        leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool,
+        weighting=args.weighting, segments=args.segments)
     options.check()
     return options
 
 
 def _truth(name, n):
     if name == "table1":
+        from trialformat import reference as ref
         if n != 2:
             raise ValueError(f"--truth table1 is a 2-joint arm; these trials have {n} joints")
-        return ref.arm_matrices()
+        return tf.reference.arm_matrices()
     if name == "reference-3dof":
         if n != 3:
             raise ValueError(f"--truth reference-3dof is a 3-joint arm; these trials have "
                              f"{n} joints")
+        from .synthetic import ARM_3DOF
         return ARM_3DOF
     return None
 
@@ -121,6 +130,7 @@ def _truth(name, n):
 def _read(sources, options):
     """Read the trials; the readers' warnings (keys filled from the reference, an unknown
     format) go to stderr as one plain line each, not as Python warnings with source lines."""
+    import trialformat as tf
     sources = [Path(s) for s in sources]
     trials = []
     with warnings.catch_warnings(record=True) as caught:
@@ -136,6 +146,8 @@ def lab_results(trials, options, truth_name="none", failures=None):
     """Analyse every recording or condition. With a ``failures`` list, a condition the
     estimator refuses (EstimationError: too few segments, a joint without a trial...) is
     appended to it as ``(label, message)`` and the others go on; without, it raises."""
+    from .errors import EstimationError
+    from .lab import analyse, estimation_units
     results = []
     for unit in estimation_units(trials, pool=options.pool):
         truth = _truth(truth_name, unit.trials[0].n_dof)
@@ -150,6 +162,7 @@ def lab_results(trials, options, truth_name="none", failures=None):
 
 def _report_failures(failures, results) -> int:
     """Print one line per failed condition; exit status 1 when any failed."""
+    from .errors import EstimationError
     if failures and not results:  # nothing to write: the refusal itself, one line
         if len(failures) == 1:
             raise EstimationError(failures[0][1])
@@ -198,12 +211,14 @@ def _check_json_out(path: Path) -> None:
 
 def describe(r) -> str:
     """Text of one result: set-up line, one line per element, the warnings."""
+    from .lab import UNITS, WEIGHTING_TEXT, element_indices, symbol_of as symbol
     c = r.corrections
     lines = [f"{r.label}: method={r.method}, trials={', '.join(r.trials)} ({r.reason}); "
              f"band {r.band_hz[0]:g}-{r.band_hz[1]:g} Hz ({r.band_source}), "
              f"{r.n_segments} segments; "
              f"sampling correction {'on' if c['left_limit_sampling'] else 'off'}, "
-             f"leakage correction {'on' if c['window_leakage'] else 'off'}"]
+             f"leakage correction {'on' if c['window_leakage'] else 'off'}",
+             f"  fit: {WEIGHTING_TEXT[r.weighting]} ({r.weighting})"]
     conf = int(round(100 * r.fit.confidence))
     for i, k in element_indices(r.n_dof):
         e = f"Z{i + 1}{k + 1}" if r.n_dof > 1 else "Z"
@@ -218,6 +233,14 @@ def describe(r) -> str:
                                               for p in "KBM") + "%"
         lines.append(text)
     lines.append(f"  (± : {conf} % confidence intervals)")
+    if r.sensitivity:
+        nv = len(r.sensitivity["variants"])
+        for i, k in element_indices(r.n_dof):
+            e = f"Z{i + 1}{k + 1}" if r.n_dof > 1 else "Z"
+            rng = r.sensitivity["range"]
+            lines.append(f"  {e} over {nv} band/weighting choices: " + "  ".join(
+                f"{symbol(p, r.n_dof)} {rng[p][0][i][k]:.4g}...{rng[p][1][i][k]:.4g}"
+                for p in "KBM"))
     lines += [f"  warning: {w}" for w in r.warnings]
     return "\n".join(lines)
 
@@ -241,6 +264,7 @@ def run_figures(args) -> int:
             n = max(t.n_dof for t in trials)
             truth = {2: "table1", 3: "reference-3dof"}.get(n, "none")
         compare = None if args.compare.lower() == "none" else args.compare
+        from .report import make_report
         result = make_report(args.folders, args.out, truth=truth, variant=args.fig_variant,
                              compare=compare)
         files = result["files"]
@@ -249,6 +273,7 @@ def run_figures(args) -> int:
                   file=sys.stderr)
     else:
         truth = "none" if args.truth == "auto" else args.truth
+        from .labreport import write_lab_report
         failures = []
         results = lab_results(trials, options, truth, failures)
         status = _report_failures(failures, results)

@@ -32,9 +32,7 @@ VARIANTS = (
     ("direct_sampling", "direct", True, False),
 )
 
-#: The recommended (bias-removing) variant and the paper's plain T/R.
-RECOMMENDED = "full_corrected"
-PAPER = "decomposition"
+from .names import PAPER, RECOMMENDED  # noqa: E402  (the recommended and the paper's variant)
 
 #: Short descriptions of the variants, for figure titles and tables.
 VARIANT_LABELS = {

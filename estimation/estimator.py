@@ -35,9 +35,9 @@ import numpy as np
 
 from . import spectral
 from .errors import EstimationError
+from .names import METHODS
 from .spectral import WelchOptions
 
-METHODS = ("decomposition", "full", "closed_loop", "direct")
 BAND_HZ = (0.0, 15.0)
 
 

@@ -8,16 +8,26 @@ the user's :class:`AnalysisOptions` (method, band, Welch segment, overlap, windo
 correction separately) and returns a :class:`LabResult`: Z of every element with its
 coherence, M, B, K with confidence intervals, R^2 (the fit's VAF), and warnings for a
 non-physical fit, low coherence, a poor fit or a poorly determined parameter.
+
+On top of the fit (docs/estimation.md, "One answer"): the default band comes from the
+data (:func:`data_band`: where the perturbation has power and the coherence is high), the
+fit is one weighted linear least squares with weights from the data (accuracy.data_weights),
+:func:`sensitivity` refits over neighbouring bands and weightings and reports how far M, B,
+K move, :func:`segment_fits` fits successive time segments of each recording (a warning when
+they differ beyond their intervals: time-varying impedance), and :func:`convention_warnings`
+names the metadata key of a likely reversed torque sign or of absolute angles.
 Works for any number of joints n >= 1.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
+from types import SimpleNamespace
 
 import numpy as np
 
-from .accuracy import corrected_impedance, fit_impedance, left_limit_delay, true_impedance, vaf
+from .accuracy import (WEIGHTINGS, corrected_impedance, fit_impedance, left_limit_delay,
+                       true_impedance, vaf)
 from .conditions import condition_of
 from .errors import EstimationError
 from .estimator import (METHODS, band_mask, default_method, estimate_impedance,
@@ -32,7 +42,14 @@ class AnalysisOptions:
     """What the user sets; None means "from the data" (docs/estimation.md).
 
     method : "auto" or one of estimation.METHODS
-    band_hz : (lo, hi) [Hz] or None (0 to the declared ``perturbation.cutoff_hz``)
+    band_hz : (lo, hi) [Hz] or None (0 to the declared ``perturbation.cutoff_hz``, else
+        :func:`data_band`)
+    weighting : accuracy.WEIGHTINGS (default ``smoothed``: relative error, 1/|Z| from the
+        neighbouring bins, from the data alone, solved once)
+    band_coherence_min, band_power_db : the data band: coherence at least this, the
+        perturbation's PSD within this many dB of its peak
+    sensitivity : refit over neighbouring bands and weightings (:func:`sensitivity`)
+    segments : time segments of each recording fitted apart (0: no check)
     nperseg, noverlap, nfft : Welch segment, overlap, FFT length [samples]
         (defaults 8192, 3/4 of nperseg, nperseg)
     window : scipy.signal window name
@@ -46,6 +63,11 @@ class AnalysisOptions:
 
     method: str = "auto"
     band_hz: tuple | None = None
+    weighting: str = "smoothed"
+    band_coherence_min: float = 0.9
+    band_power_db: float = 40.0
+    sensitivity: bool = True
+    segments: int = 4
     nperseg: int = 8192
     noverlap: int | None = None
     nfft: int | None = None
@@ -66,6 +88,12 @@ class AnalysisOptions:
             if getattr(self, name) not in ("auto", "on", "off"):
                 raise EstimationError(f"{name} must be 'auto', 'on' or 'off', got "
                                       f"{getattr(self, name)!r}")
+        if self.weighting not in WEIGHTINGS:
+            raise EstimationError(f"weighting must be one of {WEIGHTINGS}, got "
+                                  f"{self.weighting!r}")
+        if self.segments < 0 or self.segments == 1:
+            raise EstimationError(f"segments must be 0 (no check) or at least 2, got "
+                                  f"{self.segments}")
         if self.band_hz is not None and not 0 <= self.band_hz[0] < self.band_hz[1]:
             raise EstimationError(f"band must be 0 <= lo < hi [Hz], got {self.band_hz}")
         if self.nperseg < 2:
@@ -126,6 +154,11 @@ class LabResult:
     coherence_band: np.ndarray
     warnings: list = field(default_factory=list)
     errors_pct: dict | None = None
+    weighting: str = "smoothed"
+    data_band: dict | None = None
+    sensitivity: dict | None = None
+    segments: list = field(default_factory=list)
+    flags: list = field(default_factory=list)
 
     def parameters(self) -> dict:
         """``{"M"|"B"|"K": {"value", "ci", "unit", "name"}}`` with (n, n) nested lists."""
@@ -143,32 +176,123 @@ class LabResult:
                "parameters": self.parameters(),
                "r2": self.fit.r2.tolist(), "vaf_pct": self.vaf.tolist(),
                "coherence_band_mean": self.coherence_band.tolist(),
+               "weighting": self.weighting, "weighting_text": WEIGHTING_TEXT[self.weighting],
+               "data_band": self.data_band, "sensitivity": self.sensitivity,
+               "segments": self.segments, "flags": self.flags,
                "warnings": self.warnings}
         if self.errors_pct is not None:
             out["errors_pct"] = {k: v.tolist() for k, v in self.errors_pct.items()}
         return out
 
+    @property
+    def f_max(self) -> float:
+        """Top [Hz] of the FRF table and plots: the coherent range (:func:`coherent_top`),
+        at least the band's top."""
+        return max(self.band_hz[1], coherent_top(self.f, self.coherence, self.n_dof))
+
     def frf_table(self, f_max=None) -> dict:
         """Columns of the FRF table: ``f_Hz``, ``in_band`` and per element ``Z{ik}_mag``
-        [N m/rad], ``Z{ik}_phase_deg``, ``Z{ik}_coherence``, ``Z{ik}_fit_mag``,
-        ``Z{ik}_fit_phase_deg``; bins ``0 < f <= f_max`` (default twice the band top)."""
-        f_max = min(2 * self.band_hz[1], self.fs / 2) if f_max is None else f_max
+        [N m/rad], ``Z{ik}_phase_deg``, ``Z{ik}_coherence``, ``Z{ik}_mag_lo``,
+        ``Z{ik}_mag_hi`` and ``Z{ik}_phase_ci_deg`` (the confidence band of
+        :func:`frf_confidence`), ``Z{ik}_fit_mag``, ``Z{ik}_fit_phase_deg``; bins
+        ``0 < f <= f_max`` (default :attr:`f_max`, the whole coherent range)."""
+        f_max = self.f_max if f_max is None else f_max
         sel = (self.f > 0) & (self.f <= f_max)
         cols = {"f_Hz": self.f[sel],
                 "in_band": ((self.f > self.band_hz[0]) & (self.f <= self.band_hz[1]))[sel]}
+        nd = effective_averages(self.n_segments, self.welch)
         for i, k in element_indices(self.n_dof):
             e = f"Z{i + 1}{k + 1}"
             z, m = self.Z[sel, i, k], self.model[sel, i, k]
+            rel = frf_confidence(self.coherence[sel, i, k], nd, self.fit.confidence)
             cols[f"{e}_mag"] = np.abs(z)
             cols[f"{e}_phase_deg"] = np.degrees(np.angle(z))
             cols[f"{e}_coherence"] = self.coherence[sel, i, k]
+            cols[f"{e}_mag_lo"] = np.abs(z) * np.exp(-rel)
+            cols[f"{e}_mag_hi"] = np.abs(z) * np.exp(rel)
+            cols[f"{e}_phase_ci_deg"] = np.degrees(rel)
             cols[f"{e}_fit_mag"] = np.abs(m)
             cols[f"{e}_fit_phase_deg"] = np.degrees(np.angle(m))
         return cols
 
 
 FRF_UNITS = {"f_Hz": "Hz", "in_band": "-", "mag": "N m/rad", "phase_deg": "deg",
-             "coherence": "-", "fit_mag": "N m/rad", "fit_phase_deg": "deg"}
+             "coherence": "-", "mag_lo": "N m/rad", "mag_hi": "N m/rad",
+             "phase_ci_deg": "deg", "fit_mag": "N m/rad", "fit_phase_deg": "deg"}
+
+WEIGHTING_TEXT = {
+    "coherence": "each bin weighted by 1/std of Zhat from its coherence (Bendat & Piersol "
+                 "9.52: |g| / (|Z| sqrt(1 - g^2)), |Z| and g^2 the means of the bins 3-6 "
+                 "away), one linear least squares",
+    "smoothed": "each bin weighted by 1/|Z| (|Z| the geometric mean of the bins 3-6 away), "
+                "one linear least squares",
+    "relative": "each bin weighted by 1/|Zhat| of the bin itself, one linear least squares",
+    "none": "unweighted linear least squares",
+    "model": "each bin weighted by 1/|Zfit| of a first fit weighted by 1/|Zhat| (two passes)"}
+
+#: Coherence that makes a stretch of the spectrum "coherent" for the plots and the FRF
+#: table (the phase is unwrapped per stretch; labreport.PHASE_MIN_COHERENCE).
+COHERENT = 0.5
+#: Shortest run of bins counted as a coherent stretch (isolated bins of a noise-dominated
+#: spectrum reach any coherence by chance with few averages).
+MIN_RUN_BINS = 5
+
+
+def runs(mask) -> list[tuple[int, int]]:
+    """(start, stop) index pairs of the runs of True in a 1-D boolean array."""
+    m = np.concatenate([[False], np.asarray(mask, bool), [False]])
+    d = np.diff(m.astype(int))
+    return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
+
+
+#: The coherent range of the plots and FRF table ends with the last stretch of
+#: RANGE_BINS bins whose mean (smallest diagonal) coherence reaches RANGE_COHERENCE.
+RANGE_BINS, RANGE_COHERENCE = 21, 0.75
+
+
+def coherent_top(f, coherence, n_dof) -> float:
+    """Top [Hz] of the coherent range: the highest bin whose centred RANGE_BINS-bin mean
+    of the smallest diagonal coherence reaches RANGE_COHERENCE (0 if none). A running
+    mean, because past the perturbation's power a noise-dominated coherence still
+    reaches 0.5 by chance in short runs."""
+    c = np.min(np.stack([coherence[:, i, i] for i in range(n_dof)]), axis=0)
+    mean = np.convolve(c, np.ones(RANGE_BINS) / RANGE_BINS, mode="same")
+    good = np.nonzero((mean >= RANGE_COHERENCE) & (np.asarray(f) > 0))[0]
+    return float(f[good[-1]]) if len(good) else 0.0
+
+
+def effective_averages(n_segments, welch) -> float:
+    """Equivalent number of independent averages of a Welch estimate [-].
+
+    ``n_segments / (1 + 2 sum_k (1 - k/n_segments) rho_k^2)``, rho_k the correlation of the
+    window with itself shifted by k segment steps (Welch 1967; Percival & Walden 1993,
+    eq. 292b): 75 % overlapping Hann segments count about half.
+    """
+    from scipy import signal
+    nperseg, step = welch["nperseg"], welch["nperseg"] - welch["noverlap"]
+    w = signal.get_window(welch["window"], nperseg)
+    den, total, k = np.sum(w ** 2), 0.0, 1
+    while k * step < nperseg and k < n_segments:
+        rho = np.sum(w[:nperseg - k * step] * w[k * step:]) / den
+        total += (1 - k / n_segments) * rho ** 2
+        k += 1
+    return n_segments / (1 + 2 * total)
+
+
+def frf_confidence(coherence, n_averages, confidence=0.95) -> np.ndarray:
+    """Half-width of the confidence band of an FRF estimate [-, and rad].
+
+    Bendat & Piersol, Random Data (4th ed.), eqs. 9.52-9.53: the normalised random error
+    of |H| is ``sqrt(1 - g^2) / (|g| sqrt(2 nd))`` and the standard deviation of the phase
+    [rad] is the same number; times the normal quantile of ``confidence``. Used as
+    ``|H| exp(+-e)`` for the magnitude and ``phase +- e`` for the phase. Shape of
+    ``coherence``; inf where the coherence is 0.
+    """
+    from scipy import stats
+    g2 = np.clip(np.asarray(coherence, dtype=float), 0.0, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = np.sqrt(1 - g2) / np.sqrt(g2 * 2 * n_averages)
+    return stats.norm.ppf(0.5 + confidence / 2) * np.where(g2 > 0, e, np.inf)
 
 
 def element_indices(n) -> list:
@@ -278,10 +402,13 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
     method = default_method(trials) if options.method == "auto" else options.method
     usable = _usable(trials, method)
     fs = usable[0].fs
-    band, band_source = _band(usable, options, fs, method)
     welch = options.welch()
+    whole = estimate_impedance(usable, method=method, band_hz=(0.0, fs / 2),
+                               detrend="constant", **welch)
+    found = data_band(whole, usable, options)
+    band, band_source = _band(usable, options, fs, method, found)
     _check_band_bins(band, band_source, welch, fs)
-    est = estimate_impedance(usable, method=method, band_hz=band, detrend="constant", **welch)
+    est = replace(whole, band_hz=band)
     sampling = _switch(options.sampling_correction, left_limit_sampled(usable))
     leakage_ok = method != "direct" and options.window == "hann"
     leakage = _switch(options.leakage_correction, leakage_ok)
@@ -289,8 +416,8 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
         raise EstimationError(f"the leakage correction needs a perturbation-based method and "
                               f"window='hann' (got {method!r}, {options.window!r})")
     delay = left_limit_delay(fs) if sampling else 0.0
-    fit = fit_impedance(est, inertia_delay_s=delay, leakage=leakage,
-                        confidence=options.confidence)
+    fit_kw = {"inertia_delay_s": delay, "leakage": leakage, "confidence": options.confidence}
+    fit = fit_impedance(est, weighting=options.weighting, **fit_kw)
     n = est.n_dof
     Zb = corrected_impedance(est, fit, leakage=leakage) if (sampling or leakage) \
         else est.Z[est.band]
@@ -303,10 +430,24 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
         corrections={"left_limit_sampling": sampling, "window_leakage": leakage,
                      "inertia_delay_s": delay},
         f=est.f, Z=est.Z, coherence=est.coherence_Z, model=model, fit=fit,
-        vaf=np.atleast_2d(vaf(Zb, ref_Z)), coherence_band=est.mean_coherence())
+        vaf=np.atleast_2d(vaf(Zb, ref_Z)), coherence_band=est.mean_coherence(),
+        weighting=options.weighting, data_band=found)
     if truth is not None:
         result.errors_pct = {p: 100 * v for p, v in fit.relative_errors(*truth).items()}
+    if options.sensitivity:
+        result.sensitivity = sensitivity(est, fit, fit_kw, options, found)
+    if options.segments:
+        result.segments = segment_fits(usable, method, band, options, fit_kw)
     result.warnings = fit_warnings(result, options) + few_segments_warning(usable, result)
+    conv = convention_warnings(result, usable)
+    tv = time_varying_warnings(result)
+    sens = sensitivity_warnings(result)
+    result.warnings += conv + tv + sens
+    result.flags = list(dict.fromkeys(
+        w.split(":")[0].split(" Z")[0] for w in result.warnings
+        if w.startswith(("non-physical", "poor fit", "torque sign", "time-varying",
+                         "band-sensitive"))))
+    result.warnings += band_suggestion(result, options)
     return result
 
 
@@ -341,7 +482,7 @@ def _usable(trials, method):
     return use
 
 
-def _band(trials, options, fs, method):
+def _band(trials, options, fs, method, found):
     """The fit band [Hz] and where it came from."""
     if options.band_hz is not None:
         lo, hi = (float(v) for v in options.band_hz)
@@ -353,12 +494,75 @@ def _band(trials, options, fs, method):
         if declared:
             lo, hi = 0.0, max(declared)
             source = "declared perturbation.cutoff_hz"
+        elif found is not None:
+            lo, hi = found["band_hz"]
+            source = found["text"]
         else:
             lo, hi = 0.0, _excited_band(trials, options, method)
-            source = "where the perturbation's spectrum is within 20 dB of its peak"
+            source = (f"no stretch where the perturbation has power and coherence >= "
+                      f"{options.band_coherence_min:g}: where the perturbation's spectrum "
+                      f"is within 20 dB of its peak")
     if hi > fs / 2:
         raise EstimationError(f"band top {hi} Hz is above the Nyquist frequency {fs / 2} Hz")
     return (lo, hi), source
+
+
+def perturbation_psd(trials, options, method):
+    """Welch PSD of the perturbation (the angle for ``direct``) of the perturbed joint,
+    the largest over the trials at each frequency: ``(f [Hz], psd [unit^2/Hz])``."""
+    from scipy import signal
+    welch = options.welch()
+    out = None
+    for t in trials:
+        x = t.theta if method == "direct" else perturbation_of(t)
+        ks = range(t.n_dof) if t.perturbed_dof is None else [t.perturbed_dof - 1]
+        for k in ks:
+            f, p = signal.welch(x[:, k], fs=t.fs, **welch)
+            out = p if out is None else np.maximum(out, p)
+    return f, out
+
+
+def data_band(estimate, trials, options) -> dict | None:
+    """The band the data support: where the perturbation has power and coherence is high.
+
+    Bins qualify where the perturbation's PSD (:func:`perturbation_psd`; the angle for the
+    direct method) is within ``options.band_power_db`` dB of its peak and the smallest
+    diagonal coherence of Z reaches ``options.band_coherence_min``. The band runs from just
+    below the first qualifying bin to the top of the last run of at least MIN_RUN_BINS
+    qualifying bins before the PSD first falls out of range (a single bin at the bottom:
+    a chance coherence of 0.9 needs far fewer averages than a Welch estimate has); bins
+    inside with low coherence (a notch) stay in and are said (``coherent_fraction``).
+
+    Returns ``{"band_hz": (lo, hi), "coherent_fraction", "text", ...}`` or None when no
+    run qualifies.
+    """
+    f = estimate.f
+    n = estimate.n_dof
+    fp, psd = perturbation_psd(trials, options, estimate.method)
+    if len(fp) != len(f):
+        return None
+    c = np.min(np.stack([estimate.coherence_Z[:, i, i] for i in range(n)]), axis=0)
+    power = psd >= psd[1:].max() * 10 ** (-options.band_power_db / 10)
+    power[0] = False
+    # the excited range: the contiguous stretch of power around the PSD's peak
+    peak = 1 + int(np.argmax(psd[1:]))
+    first, stop = next((a, b) for a, b in runs(power) if a <= peak < b)
+    ok = np.zeros(len(f), bool)
+    ok[first:stop] = c[first:stop] >= options.band_coherence_min
+    good = [(a, b) for a, b in runs(ok) if b - a >= MIN_RUN_BINS]
+    if not good:
+        return None
+    i0, i1 = int(np.argmax(ok)), good[-1][1] - 1
+    lo = float(f[i0 - 1]) if i0 > 1 else 0.0
+    hi = float(f[i1])
+    inside = (f > lo) & (f <= hi)
+    frac = float(np.mean(c[inside] >= options.band_coherence_min))
+    text = (f"from the data: perturbation within {options.band_power_db:g} dB of its peak "
+            f"and coherence >= {options.band_coherence_min:g}; {100 * frac:.0f} % of its "
+            f"bins coherent")
+    return {"band_hz": (lo, hi), "coherent_fraction": frac, "text": text,
+            "excited_top_hz": float(f[stop - 1]),
+            "coherence_min": options.band_coherence_min, "power_db": options.band_power_db}
 
 
 MIN_BAND_BINS = 3  # M, B, K: three real unknowns, two real equations per bin; CIs need more
@@ -402,6 +606,266 @@ def _excited_band(trials, options, method):
 
 def _switch(value, auto):
     return auto if value == "auto" else value == "on"
+
+
+# ----------------------------------------------------------------------------- one answer
+
+
+def _variants(band, df):
+    """Neighbouring bands of ``band``: its top at 3/4 and 1/2 of its width, its bottom
+    raised by a tenth of its width (at least 4 bins)."""
+    lo, hi = band
+    width = hi - lo
+    return [(lo, lo + 0.75 * width), (lo, lo + 0.5 * width),
+            (lo + max(0.1 * width, 4 * df), hi)]
+
+
+def sensitivity(estimate, fit, fit_kw, options, found=None) -> dict:
+    """How far M, B, K move over reasonable band and weighting choices.
+
+    Refits the same estimate (no spectra recomputed) over the band with the other data
+    weightings (``coherence``, ``smoothed``, ``relative``) and over the neighbouring bands
+    of :func:`_variants` (and the data band, when it differs) with the chosen weighting.
+    Returns ``{"variants": [{"band_hz", "weighting", "M", "B", "K", "M_ci", ...}],
+    "range": {p: [min, max] (n, n) lists}, "exceeds": {p: (n, n) bools}}``: ``exceeds``
+    is True where some variant differs from the fit by more than both its own and the
+    fit's confidence half-width (a systematic dependence on the choice, not noise).
+    """
+    df = float(estimate.f[1] - estimate.f[0])
+    band = estimate.band_hz
+    choices = [(band, w) for w in ("coherence", "smoothed", "relative")
+               if w != options.weighting]
+    bands = _variants(band, df)
+    if found is not None and tuple(found["band_hz"]) != tuple(band):
+        bands.append(tuple(found["band_hz"]))
+    choices += [(b, options.weighting) for b in bands]
+    variants = []
+    for b, w in choices:
+        if np.count_nonzero(band_mask(estimate.f, b)) < 4 * MIN_BAND_BINS:
+            continue
+        v = fit_impedance(replace(estimate, band_hz=tuple(b)), weighting=w, **fit_kw)
+        variants.append({"band_hz": [float(b[0]), float(b[1])], "weighting": w,
+                         **{p: getattr(v, p).tolist() for p in
+                            ("M", "B", "K", "M_ci", "B_ci", "K_ci", "r2")}})
+    rng, exceeds = {}, {}
+    for p in "MBK":
+        main, ci = getattr(fit, p), getattr(fit, f"{p}_ci")
+        vals = np.array([main] + [np.asarray(v[p]) for v in variants])
+        rng[p] = [vals.min(axis=0).tolist(), vals.max(axis=0).tolist()]
+        ex = np.zeros(main.shape, bool)
+        for v in variants:
+            ex |= np.abs(np.asarray(v[p]) - main) > np.maximum(ci, np.asarray(v[f"{p}_ci"]))
+        exceeds[p] = ex.tolist()
+    return {"variants": variants, "range": rng, "exceeds": exceeds}
+
+
+def sensitivity_warnings(result) -> list[str]:
+    """A warning per diagonal parameter whose sensitivity range exceeds its interval."""
+    s = result.sensitivity
+    if not s:
+        return []
+    out, n = [], result.n_dof
+    for p in ("K", "B", "M"):
+        for i in range(n):
+            if not s["exceeds"][p][i][i]:
+                continue
+            lo, hi = s["range"][p][0][i][i], s["range"][p][1][i][i]
+            value, ci = getattr(result.fit, p)[i, i], getattr(result.fit, f"{p}_ci")[i, i]
+            moved = [v for v in s["variants"]
+                     if abs(v[p][i][i] - value) > max(ci, v[f"{p}_ci"][i][i])]
+            which = "; ".join(f"{v['band_hz'][0]:.3g}-{v['band_hz'][1]:.3g} Hz "
+                              f"{v['weighting']}: {v[p][i][i]:.4g}" for v in moved[:3])
+            out.append(f"band-sensitive: {symbol_of(p, n)}{_e(i, i, n)} = {value:.4g} +- "
+                       f"{ci:.2g} {UNITS[p]} moves over {lo:.4g}...{hi:.4g} with the band "
+                       f"and weighting ({which}), beyond the statistical interval: the "
+                       f"second-order model does not hold equally across the band; report "
+                       f"the range")
+    return out
+
+
+def symbol_of(p, n) -> str:
+    return "I" if p == "M" and n == 1 else p
+
+
+def _slice(trial, a, b):
+    arrays = {k: (None if getattr(trial, k) is None else getattr(trial, k)[a:b])
+              for k in ("tau_delta", "theta", "tau_h", "tau_m", "theta_ref")}
+    return replace(trial, t=trial.t[a:b] - trial.t[a], extra={}, t_stored=None,
+                   name=f"{trial.name}[{a}:{b}]", **arrays)
+
+
+def segment_fits(trials, method, band, options, fit_kw) -> list[dict]:
+    """Fit each of ``options.segments`` successive time segments of the recordings alone.
+
+    Segment s of every trial of the set is estimated together (same method, band and
+    weighting; Welch segment the largest power of two <= a quarter of the time segment,
+    at most ``options.nperseg``, 3/4 overlap). Returns one dict per time segment:
+    ``{"t_s": [start, end], "M", "B", "K", "M_ci", "B_ci", "K_ci"}`` ((n, n) lists);
+    empty when the recordings are too short (Welch segment < 256 samples) or a segment's
+    band holds too few bins.
+    """
+    S = options.segments
+    N = min(t.n_samples for t in trials)
+    L = N // S
+    nper = min(options.nperseg, 2 ** int(np.floor(np.log2(max(L // 4, 1)))))
+    fs = trials[0].fs
+    if nper < 256 or np.count_nonzero(band_mask(np.fft.rfftfreq(nper, 1 / fs), band)) \
+            < 4 * MIN_BAND_BINS:
+        return []
+    out = []
+    for s in range(S):
+        part = [_slice(t, s * L, (s + 1) * L) for t in trials]
+        est = estimate_impedance(part, method=method, band_hz=band, detrend="constant",
+                                 nperseg=nper, noverlap=3 * nper // 4, nfft=nper,
+                                 window=options.window)
+        v = fit_impedance(est, weighting=options.weighting, **fit_kw)
+        out.append({"t_s": [s * L / fs, (s + 1) * L / fs], "nperseg": nper,
+                    **{p: getattr(v, p).tolist() for p in
+                       ("M", "B", "K", "M_ci", "B_ci", "K_ci")}})
+    return out
+
+
+#: Time-varying warning: homogeneity of the segment estimates rejected at this level
+#: (Cochran's Q, chi-square with S - 1 degrees of freedom) and the segments' spread
+#: larger than this fraction of their mean.
+TV_P_VALUE, TV_MIN_SPREAD = 1e-3, 0.05
+
+
+def time_varying_warnings(result) -> list[str]:
+    """Evidence that the impedance changed over the trial (:func:`segment_fits`).
+
+    Per diagonal parameter: the segment estimates v_s with standard errors
+    ``sigma_s = ci_s / 1.96``; ``Q = sum ((v_s - vbar) / sigma_s)^2`` (vbar their
+    inverse-variance mean) against chi-square(S - 1) (Cochran 1954). A warning when
+    p < TV_P_VALUE and the spread exceeds TV_MIN_SPREAD of the mean.
+    """
+    from scipy import stats
+    segs, n = result.segments, result.n_dof
+    if len(segs) < 2:
+        return []
+    out = []
+    for p in ("K", "B", "M"):
+        for i in range(n):
+            v = np.array([s[p][i][i] for s in segs])
+            sd = np.array([s[f"{p}_ci"][i][i] for s in segs]) / 1.96
+            if np.any(sd <= 0):
+                continue
+            w = 1 / sd ** 2
+            vbar = np.sum(w * v) / np.sum(w)
+            q = float(np.sum(w * (v - vbar) ** 2))
+            pval = float(stats.chi2.sf(q, len(v) - 1))
+            spread = (v.max() - v.min()) / max(abs(vbar), 1e-300)
+            if pval < TV_P_VALUE and spread > TV_MIN_SPREAD:
+                parts = ", ".join(f"{s['t_s'][0]:.0f}-{s['t_s'][1]:.0f} s: "
+                                  f"{s[p][i][i]:.4g}+-{s[f'{p}_ci'][i][i]:.2g}" for s in segs)
+                out.append(f"time-varying: {symbol_of(p, n)}{_e(i, i, n)} differs between "
+                           f"time segments beyond their intervals ({parts} {UNITS[p]}; "
+                           f"chi-square p {'< 1e-16' if pval < 1e-16 else f'= {pval:.1g}'}"
+                           f"): the single value "
+                           f"{getattr(result.fit, p)[i, i]:.4g} is an average over a "
+                           f"changing impedance, not one joint state")
+    return out
+
+
+#: Low-frequency phase beyond this [deg] reads as a reversed torque sign (a spring: 0).
+SIGN_PHASE_DEG = 135.0
+#: Mean angle beyond this many standard deviations (and ABSOLUTE_MIN_RAD) reads as
+#: absolute angles logged as deviations.
+ABSOLUTE_SIGMAS, ABSOLUTE_MIN_RAD = 3.0, 0.02
+
+
+def convention_warnings(result, trials) -> list[str]:
+    """Conventions found in the data, not guessed: the metadata key to declare.
+
+    - ``torque sign reversed?``: every diagonal K, B, M negative, or the estimate's phase
+      beyond SIGN_PHASE_DEG over the lowest coherent bins of the band (median of the
+      first five with coherence >= 0.5): a passive joint has K, B, I > 0 and a phase near
+      0 deg at low frequency. Key: ``sensors.torque_sign``.
+    - ``absolute angles?``: a joint's mean angle beyond ABSOLUTE_SIGMAS standard
+      deviations and ABSOLUTE_MIN_RAD while the file declares deviations. Key: ``angles``.
+    """
+    out, n = [], result.n_dof
+    fit = result.fit
+    band = band_mask(result.f, result.band_hz)
+    signs = sorted({int((t.meta.get("sensors") or {}).get("torque_sign", 1)) for t in trials})
+    for i in range(n):
+        evidence = []
+        if all(getattr(fit, p)[i, i] < 0 for p in "MBK"):
+            evidence.append(f"K, B, {symbol_of('M', n)} all negative")
+        idx = np.nonzero(band & (result.coherence[:, i, i] >= COHERENT))[0][:5]
+        if len(idx):
+            phase = float(np.degrees(np.median(np.abs(np.angle(result.Z[idx, i, i])))))
+            if phase > SIGN_PHASE_DEG:
+                evidence.append(f"phase {phase:.0f} deg at {result.f[idx[0]]:.2g}-"
+                                f"{result.f[idx[-1]]:.2g} Hz (a spring gives 0)")
+        if evidence:
+            now = signs[0] if len(signs) == 1 else signs
+            want = -signs[0] if len(signs) == 1 else "the opposite"
+            out.append(f"torque sign reversed? Z{_e(i, i, n)}: {'; '.join(evidence)}. If the "
+                       f"torque sensor's sign is opposite to the angle's, declare "
+                       f"\"sensors\": {{\"torque_sign\": {want}}} in the metadata (now "
+                       f"{now}); the reader then negates tau_h")
+    for t in trials:
+        if t.meta.get("angles") == "absolute" or t.theta is None:
+            continue
+        m, sd = t.theta.mean(axis=0), t.theta.std(axis=0)
+        for j in range(t.n_dof):
+            if abs(m[j]) > max(ABSOLUTE_SIGMAS * sd[j], ABSOLUTE_MIN_RAD):
+                out.append(f"absolute angles? {t.name}: theta[{j + 1}] has mean "
+                           f"{m[j]:.4g} rad ({np.degrees(m[j]):.3g} deg), "
+                           f"{abs(m[j]) / sd[j]:.1f} times its standard deviation, while "
+                           f"the file declares deviations from posture_deg. If it logs "
+                           f"absolute joint angles, declare \"angles\": \"absolute\" with "
+                           f"the posture in posture_deg (K, B, I do not change: the mean is "
+                           f"removed per Welch segment)")
+    return out
+
+
+def _good_fit(fit, options, n) -> bool:
+    diag = [getattr(fit, p)[i, i] for p in "MBK" for i in range(n)]
+    cis = [getattr(fit, f"{p}_ci")[i, i] for p in "MBK" for i in range(n)]
+    return (min(diag) > 0 and all(c <= options.ci_max_rel * v for v, c in zip(diag, cis))
+            and float(np.min(np.diag(np.atleast_2d(fit.r2)))) >= options.r2_min)
+
+
+def band_suggestion(result, options) -> list[str]:
+    """When the fit is non-physical, poor, poorly determined or of low coherence, a band
+    that works: the data band or a neighbouring band (:func:`sensitivity`) whose fit is
+    physical, well determined and R^2 >= r2_min."""
+    flagged = [w for w in result.warnings
+               if w.startswith(("non-physical", "poor fit", "low coherence"))
+               or "poorly determined" in w]
+    if not flagged:  # band-sensitive alone: another band would not mend the model
+        return []
+    n = result.n_dof
+    cands = []
+    if result.data_band is not None:
+        cands.append(tuple(result.data_band["band_hz"]))
+    for v in (result.sensitivity or {}).get("variants", []):
+        if v["weighting"] == result.weighting:
+            cands.append(tuple(v["band_hz"]))
+    for b in cands:
+        if np.allclose(b, result.band_hz):
+            continue
+        v = next((v for v in (result.sensitivity or {}).get("variants", [])
+                  if np.allclose(v["band_hz"], b) and v["weighting"] == result.weighting),
+                 None)
+        if v is None:
+            continue
+        f = SimpleNamespace(**{key: np.asarray(v[key]) for key in
+                               ("M", "B", "K", "M_ci", "B_ci", "K_ci", "r2")})
+        if _good_fit(f, options, n):
+            return [f"suggested band: --band {b[0]:.3g} {b[1]:.3g} (K, B, "
+                    f"{symbol_of('M', n)} positive and well determined, R^2 >= "
+                    f"{options.r2_min:g} there"
+                    + (f"; {result.data_band['text']}" if result.data_band is not None
+                       and np.allclose(b, result.data_band["band_hz"]) else "") + ")"]
+    where = (f"the data band {result.data_band['band_hz'][0]:.3g}-"
+             f"{result.data_band['band_hz'][1]:.3g} Hz" if result.data_band else "")
+    return [f"no band tried ({where + ', ' if where else ''}the band at 1/2 and 3/4 of "
+            f"its width, its bottom raised) gives a physical, well determined fit with R^2 "
+            f">= {options.r2_min:g}: the second-order model may not describe this joint "
+            f"(a reflex pathway, a time-varying state?)"]
 
 
 def fit_warnings(result: LabResult, options: AnalysisOptions) -> list[str]:
@@ -454,8 +918,14 @@ def result_rows(results) -> list[dict]:
             for p in "MBK":
                 row[f"{p} [{UNITS[p]}]"] = float(getattr(r.fit, p)[i, k])
                 row[f"{p}_ci [{UNITS[p]}]"] = float(getattr(r.fit, f"{p}_ci")[i, k])
+            if r.sensitivity:
+                for p in "MBK":
+                    row[f"{p}_range_min [{UNITS[p]}]"] = r.sensitivity["range"][p][0][i][k]
+                    row[f"{p}_range_max [{UNITS[p]}]"] = r.sensitivity["range"][p][1][i][k]
             row.update({"R2": float(r.fit.r2[i, k]), "VAF [%]": float(r.vaf[i, k]),
-                        "coherence": float(r.coherence_band[i, k])})
+                        "coherence": float(r.coherence_band[i, k]),
+                        "band_lo [Hz]": float(r.band_hz[0]), "band_hi [Hz]": float(r.band_hz[1]),
+                        "weighting": r.weighting})
             if r.errors_pct is not None:
                 row.update({f"err_{p} [%]": float(r.errors_pct[p][i, k]) for p in "MBK"})
             rows.append(row)

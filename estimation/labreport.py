@@ -4,9 +4,11 @@
 
 - ``frf_LABEL.csv`` / ``frf_LABEL.json``: frequency [Hz], magnitude [N m/rad], phase [deg]
   and coherence [-] of every element Z_ik, with the fitted model's magnitude and phase;
-- ``bode_LABEL.png``: magnitude, unwrapped phase (where coherent) and coherence of every
-  element (one column per element for 1-2 joints, an n x n grid for n >= 3), the
-  estimate, the fitted model and the band, the fitted parameters in a caption;
+- ``bode_LABEL.png``: magnitude, phase (unwrapped per coherent stretch) and coherence of
+  every element over the whole coherent range (one column per element for 1-2 joints, an
+  n x n grid for n >= 3), the estimate with its confidence band (Bendat & Piersol), the
+  fitted model and the band, the flags of the fit in red, the fitted parameters with
+  their intervals and sensitivity ranges in a caption;
 
 and for all results ``parameters.csv`` / ``parameters.md`` (M, B, K with confidence
 intervals and units, R^2, VAF, coherence per element) and ``results.json`` (everything,
@@ -35,7 +37,8 @@ from trialformat import atomic_write  # noqa: E402
 from trialformat.logs import current_umask, replace_dir  # noqa: E402
 from trialformat.tempdirs import disown_temp_dir, own_temp_dir  # noqa: E402
 
-from .lab import FRF_UNITS, UNITS, element_indices, result_rows  # noqa: E402
+from .lab import (COHERENT, FRF_UNITS, MIN_RUN_BINS, UNITS, WEIGHTING_TEXT,  # noqa: E402
+                  effective_averages, element_indices, frf_confidence, result_rows, runs)
 
 
 def safe_name(label: str) -> str:
@@ -110,10 +113,11 @@ def parameters_markdown(results) -> str:
     lines = []
     for r in results:
         lines.append(f"### {r.label} ({r.method}, {', '.join(r.trials)})\n")
-        lines.append(f"band {r.band_hz[0]:g}-{r.band_hz[1]:g} Hz, {r.n_segments} segments "
-                     f"of {r.welch['nperseg']}, corrections: "
+        lines.append(f"band {r.band_hz[0]:.4g}-{r.band_hz[1]:.4g} Hz ({r.band_source}), "
+                     f"{r.n_segments} segments of {r.welch['nperseg']}, corrections: "
                      f"sampling {'on' if r.corrections['left_limit_sampling'] else 'off'}, "
-                     f"leakage {'on' if r.corrections['window_leakage'] else 'off'}\n")
+                     f"leakage {'on' if r.corrections['window_leakage'] else 'off'}; fit: "
+                     f"{WEIGHTING_TEXT[r.weighting]} ({r.weighting})\n")
         head = (["element"] + [f"{symbol(p, r.n_dof)} [{UNITS[p]}]" for p in "MBK"]
                 + ["R^2", "VAF [%]", "coherence"])
         lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -126,6 +130,14 @@ def parameters_markdown(results) -> str:
             cells += [f"{r.fit.r2[i, k]:.4f}", f"{r.vaf[i, k]:.2f}",
                       f"{r.coherence_band[i, k]:.3f}"]
             lines.append("| " + " | ".join(cells) + " |")
+        if r.sensitivity:
+            nv = len(r.sensitivity["variants"])
+            for i, k in element_indices(r.n_dof):
+                rng = r.sensitivity["range"]
+                lines.append(f"| range over {nv} band/weighting choices "
+                             + ("" if r.n_dof == 1 else f"Z{i + 1}{k + 1} ") + "| "
+                             + " | ".join(f"{rng[p][0][i][k]:.5g} ... {rng[p][1][i][k]:.5g}"
+                                          for p in "MBK") + " | | | |")
         lines.append(f"\n± : {conf} % confidence interval half-widths. "
                      + ("1 joint: I is the inertia (column M in parameters.csv and "
                         "results.json).\n" if r.n_dof == 1 else "\n"))
@@ -140,40 +152,76 @@ def symbol(p: str, n_dof: int) -> str:
     return "I" if p == "M" and n_dof == 1 else p
 
 
-#: The estimate's phase is drawn only in the fit band and where the element's coherence
-#: reaches this: elsewhere the phase of a noise-dominated FRF wanders over +-180 deg.
-PHASE_MIN_COHERENCE = 0.5
+#: The estimate's phase is drawn where the element's coherence reaches this, in stretches
+#: of at least lab.MIN_RUN_BINS bins, each unwrapped on its own (lab.COHERENT).
+PHASE_MIN_COHERENCE = COHERENT
+
+
+def stretch_phase_deg(z, coherence, reference_deg=None, threshold=PHASE_MIN_COHERENCE):
+    """Phase of ``z`` [deg], unwrapped within each coherent stretch, NaN elsewhere.
+
+    A stretch is a run of at least MIN_RUN_BINS bins with ``coherence >= threshold``. Each
+    is unwrapped alone (never through a coherence gap, where the phase means nothing) and
+    shifted by the multiple of 360 deg that brings its first bin nearest
+    ``reference_deg`` there (the fitted model's unwrapped phase; else the principal
+    value). Shape of ``z``.
+    """
+    z = np.asarray(z)
+    out = np.full(z.shape, np.nan)
+    for a, b in runs(np.asarray(coherence) >= threshold):
+        if b - a < MIN_RUN_BINS:
+            continue
+        ph = np.degrees(np.unwrap(np.angle(z[a:b])))
+        target = np.degrees(np.angle(z[a])) if reference_deg is None else reference_deg[a]
+        out[a:b] = ph - 360.0 * np.round((ph[0] - target) / 360.0)
+    return out
 
 
 def bode(result):
     """Magnitude, phase and coherence of every element; estimate, fitted model and band.
 
-    Elements laid out as in the report's Fig. 2 (estimation.report.element_axes). The
-    estimate's phase is unwrapped and drawn in the fit band where the coherence is at least
-    :data:`PHASE_MIN_COHERENCE`; the fitted K, B, M (I for one joint) are in a caption below
-    the panels (and in parameters.md).
+    Drawn over the whole coherent range (:attr:`LabResult.f_max`). The estimate's phase is
+    unwrapped per coherent stretch (:func:`stretch_phase_deg`); a shaded confidence band
+    on magnitude and phase from the coherence and the equivalent number of Welch averages
+    (Bendat & Piersol eqs. 9.52-9.53, :func:`estimation.lab.frf_confidence`) where the
+    coherence is at least :data:`PHASE_MIN_COHERENCE`; the flags (non-physical or poor
+    fit, reversed torque sign, band-sensitive or time-varying parameters) in red in each
+    element's magnitude panel; the fitted K, B, M (I for one joint) in a caption below.
     """
     from .report import element_axes, unwrapped_phase_deg
 
     n = result.n_dof
-    f_max = min(2 * result.band_hz[1], result.fs / 2)
+    f_max = result.f_max
     sel = (result.f > 0) & (result.f <= f_max)
     f = result.f[sel]
-    in_band = (f >= result.band_hz[0]) & (f <= result.band_hz[1])
     caption = _parameter_caption(result)
     width = max(4.2 * n * n + 1, 6.5) if n <= 2 else 4.4 * n
     height = (6.6 if n <= 2 else 6.6 * n) + 0.9 + 0.22 * len(caption)
     fig = plt.figure(figsize=(width, height))
     axes = element_axes(fig, n, ("mag", "phase", "coherence"))
+    nd = effective_averages(result.n_segments, result.welch)
+    conf = int(round(100 * result.fit.confidence))
+    flags = sorted(set(result.flags))
     for (i, k), (ax_m, ax_p, ax_c) in axes.items():
         z, m, c = result.Z[sel, i, k], result.model[sel, i, k], result.coherence[sel, i, k]
         e = f"Z{i + 1}{k + 1}" if n > 1 else "Z"
-        ax_m.loglog(f, np.abs(z), color="tab:blue", lw=1.0, label="estimate")
+        coherent = c >= PHASE_MIN_COHERENCE
+        rel = np.where(coherent, frf_confidence(c, nd, result.fit.confidence), np.nan)
+        model_phase = unwrapped_phase_deg(m)
+        phase = stretch_phase_deg(z, c, model_phase)
+        ax_m.fill_between(f, np.abs(z) * np.exp(-rel), np.abs(z) * np.exp(rel),
+                          color="tab:blue", alpha=0.25, lw=0, label=f"{conf} % band")
+        ax_m.loglog(f, np.where(coherent, np.abs(z), np.nan), color="tab:blue", lw=1.0,
+                    label="estimate")
+        ax_m.loglog(f, np.where(coherent, np.nan, np.abs(z)), color="0.6", lw=0.6,
+                    label=f"estimate, coherence < {PHASE_MIN_COHERENCE:g}")
         ax_m.loglog(f, np.abs(m), "k--", lw=1.2, label="fitted model")
-        ax_p.semilogx(f, unwrapped_phase_deg(z, in_band & (c >= PHASE_MIN_COHERENCE)), color="tab:blue",
-                      lw=1.0)
-        ax_p.semilogx(f, unwrapped_phase_deg(m), "k--", lw=1.2)
+        ax_p.fill_between(f, phase - np.degrees(rel), phase + np.degrees(rel),
+                          color="tab:blue", alpha=0.25, lw=0)
+        ax_p.semilogx(f, phase, color="tab:blue", lw=1.0)
+        ax_p.semilogx(f, model_phase, "k--", lw=1.2)
         ax_c.semilogx(f, c, color="tab:green", lw=1.0)
+        ax_c.axhline(PHASE_MIN_COHERENCE, color="0.5", lw=0.6, ls=":")
         ax_c.set_ylim(0, 1.05)
         ax_m.set_title(e, fontsize=10)
         ax_m.set_ylabel(f"|{e}| [N m/rad]")
@@ -182,24 +230,38 @@ def bode(result):
         for ax in (ax_m, ax_p, ax_c):
             ax.axvspan(max(result.band_hz[0], f[0]), result.band_hz[1], color="0.9", zorder=0)
             ax.grid(True, which="both", alpha=0.3)
+            ax.set_xlim(f[0], f[-1])
+        if flags and (i == k or n == 1):
+            ax_m.text(0.02, 0.02, "FLAGGED: " + ", ".join(flags), transform=ax_m.transAxes,
+                      color="tab:red", fontsize=8, va="bottom", ha="left", wrap=True,
+                      bbox={"facecolor": "white", "edgecolor": "tab:red", "alpha": 0.85})
         if n <= 2 or i == n - 1:
             ax_c.set_xlabel("frequency [Hz]")
-    axes[(0, 0)][0].legend(fontsize=8)
-    fig.suptitle(f"{result.label}: {result.method}, fit band {result.band_hz[0]:g}-"
-                 f"{result.band_hz[1]:g} Hz (shaded)\n"
-                 f"estimate's phase drawn in the band where coherence >= "
-                 f"{PHASE_MIN_COHERENCE:g}", fontsize=10)
+    axes[(0, 0)][0].legend(fontsize=7, loc="upper left")
+    fig.suptitle(f"{result.label}: {result.method}, fit band {result.band_hz[0]:.3g}-"
+                 f"{result.band_hz[1]:.3g} Hz (shaded), {result.weighting} weighting\n"
+                 f"phase unwrapped per stretch of coherence >= {PHASE_MIN_COHERENCE:g}\n"
+                 f"{conf} % band: coherence, {nd:.1f} equivalent averages (Bendat & "
+                 f"Piersol 9.52-9.53)", fontsize=9)
     bottom = (0.25 + 0.22 * len(caption)) / height
-    fig.text(0.5, 0.15 / height, "\n".join(caption), ha="center", va="bottom", fontsize=9,
+    fig.text(0.5, 0.15 / height, "\n".join(caption), ha="center", va="bottom", fontsize=8,
              family="monospace")
-    fig.tight_layout(rect=(0, bottom, 1, 1 - 0.6 / height))
+    fig.tight_layout(rect=(0, bottom, 1, 1 - 0.55 / height))
     return fig
 
 
 def _parameter_caption(result) -> list[str]:
-    """One line per fitted parameter: ``K = [...] N m/rad`` (I for one joint)."""
-    return [f"{symbol(p, result.n_dof)} = " + _matrix_text(getattr(result.fit, p))
-            + f" {UNITS[p]}" for p in ("K", "B", "M")]
+    """One line per fitted parameter: ``K = [...] +- [...] N m/rad`` (I for one joint),
+    with the sensitivity range over bands and weightings when computed."""
+    lines = []
+    for p in ("K", "B", "M"):
+        text = (f"{symbol(p, result.n_dof)} = " + _matrix_text(getattr(result.fit, p))
+                + " +- " + _matrix_text(getattr(result.fit, f"{p}_ci")) + f" {UNITS[p]}")
+        if result.sensitivity:
+            lo, hi = result.sensitivity["range"][p]
+            text += f"  (range {_matrix_text(lo)} ... {_matrix_text(hi)})"
+        lines.append(text)
+    return lines
 
 
 def _matrix_text(a) -> str:

@@ -5,16 +5,36 @@ Public API::
     from orchestrator import Setup, simulate_trial, make_perturbation, Plant, run_grid
 """
 
-from .controller import IMBIC, ControllerConfig
-from .effects import CATALOGUE, parse_effects
-from .errors import (ContractError, DivergenceError, EffectError, FMUCallError,
-                     ParameterError, PlantFileError, PlantWarning, RateError, SetupError)
-from .grid import grid_seed, grid_tasks, parse_dof, run_grid, trial_name
-from .paper import paper_plan, run_paper
-from .perturbation import make_perturbation
-from .plant import Plant, check_contract
-from .setup import Setup
-from .trial import default_fmu_path, get_plant, simulate_plant, simulate_trial
+_EXPORTS = {
+    'IMBIC': '.controller',
+    'ControllerConfig': '.controller',
+    'CATALOGUE': '.effects',
+    'parse_effects': '.effects',
+    'ContractError': '.errors',
+    'DivergenceError': '.errors',
+    'EffectError': '.errors',
+    'FMUCallError': '.errors',
+    'ParameterError': '.errors',
+    'PlantFileError': '.errors',
+    'PlantWarning': '.errors',
+    'RateError': '.errors',
+    'SetupError': '.errors',
+    'grid_seed': '.grid',
+    'grid_tasks': '.grid',
+    'parse_dof': '.grid',
+    'run_grid': '.grid',
+    'trial_name': '.grid',
+    'paper_plan': '.paper',
+    'run_paper': '.paper',
+    'make_perturbation': '.perturbation',
+    'Plant': '.plant',
+    'check_contract': '.plant',
+    'Setup': '.setup',
+    'default_fmu_path': '.trial',
+    'get_plant': '.trial',
+    'simulate_plant': '.trial',
+    'simulate_trial': '.trial',
+}
 
 __all__ = ["Setup", "simulate_trial", "make_perturbation", "Plant", "run_grid", "IMBIC",
            "ControllerConfig", "CATALOGUE", "parse_effects", "ContractError",
@@ -22,3 +42,18 @@ __all__ = ["Setup", "simulate_trial", "make_perturbation", "Plant", "run_grid", 
            "PlantFileError", "PlantWarning", "RateError", "SetupError", "grid_tasks",
            "grid_seed", "parse_dof", "paper_plan", "run_paper",
            "trial_name", "check_contract", "default_fmu_path", "get_plant", "simulate_plant"]
+
+
+def __getattr__(name):
+    """Load the submodule of a public name on first use (PEP 562), so that importing the
+    package (``python -m orchestrator``, the CLI's --help) loads no numpy, scipy or FMU code."""
+    if name in _EXPORTS:
+        from importlib import import_module
+        value = getattr(import_module(_EXPORTS[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))

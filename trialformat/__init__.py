@@ -3,17 +3,36 @@
 Shared by the orchestrator (which writes trials) and the estimation and diagnosis packages
 (which read them); it imports neither. Readers: CSV of any common writer (pyarrow) and
 MATLAB ``.mat`` v4-v7.3 (scipy.io, h5py).
+
+Public names load their submodule on first use (PEP 562): importing the package, or a
+light submodule such as ``trialformat.cliargs``, loads no numpy, so the CLI's --help and
+option errors print at once.
 """
 
-from . import csvtable, reference
-from .errors import MatFileError, OutputError, TrialFormatError
-from .logs import (FORMAT, MIN_SAMPLES, SIGNALS, Trial, atomic_write, check_trial,
-                   column_names, default_metadata, read_trial, read_trials, required_columns,
-                   trial_exists, trial_stem, write_trial)
-from .matlab import is_mat, read_trial_mat, read_trials_mat, write_trial_mat
+_EXPORTS = {
+    "MatFileError": ".errors", "OutputError": ".errors", "TrialFormatError": ".errors",
+    "FORMAT": ".logs", "MIN_SAMPLES": ".logs", "SIGNALS": ".logs", "Trial": ".logs",
+    "atomic_write": ".logs", "check_trial": ".logs", "column_names": ".logs",
+    "default_metadata": ".logs", "read_trial": ".logs", "read_trials": ".logs",
+    "required_columns": ".logs", "trial_exists": ".logs", "trial_stem": ".logs",
+    "write_trial": ".logs",
+    "is_mat": ".matlab", "read_trial_mat": ".matlab", "read_trials_mat": ".matlab",
+    "write_trial_mat": ".matlab",
+}
+_SUBMODULES = ("cliargs", "csvtable", "errors", "logs", "matlab", "processes", "reference",
+               "tempdirs")
 
-__all__ = ["reference", "TrialFormatError", "MatFileError", "OutputError", "trial_stem",
-           "read_trials_mat", "FORMAT", "MIN_SAMPLES",
-           "SIGNALS", "Trial", "atomic_write", "check_trial", "column_names",
-           "default_metadata", "read_trial", "read_trials", "required_columns",
-           "trial_exists", "write_trial", "is_mat", "read_trial_mat", "write_trial_mat"]
+__all__ = ["reference", *_EXPORTS]
+
+
+def __getattr__(name):
+    """Load a public name's submodule on first use (PEP 562)."""
+    from importlib import import_module
+    if name in _EXPORTS:
+        value = getattr(import_module(_EXPORTS[name], __name__), name)
+    elif name in _SUBMODULES:
+        value = import_module("." + name, __name__)
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
