@@ -10,9 +10,10 @@ from .errors import MatFileError, TrialFormatError
 from .logs import (FORMAT, MIN_SAMPLES, SIGNALS, Trial, atomic_write, check_trial,
                    column_names, default_metadata, read_trial, read_trials, required_columns,
                    trial_exists, write_trial)
-from .matlab import is_mat, read_trial_mat, write_trial_mat
+from .matlab import is_mat, read_trial_mat, read_trials_mat, write_trial_mat
 
 __all__ = ["reference", "TrialFormatError", "MatFileError", "FORMAT", "MIN_SAMPLES",
            "SIGNALS", "Trial", "atomic_write", "check_trial", "column_names",
            "default_metadata", "read_trial", "read_trials", "required_columns",
-           "trial_exists", "write_trial", "is_mat", "read_trial_mat", "write_trial_mat"]
+           "trial_exists", "write_trial", "is_mat", "read_trial_mat", "read_trials_mat",
+           "write_trial_mat"]

@@ -242,8 +242,8 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
         On anything log-format.md tells a reader to refuse; the message names the file and
         the 1-based data row, column or key.
     """
-    if Path(path).suffix.lower() == ".mat":
-        from .matlab import read_trial_mat
+    from .matlab import read_trial_mat, split_variable
+    if split_variable(path)[0].suffix.lower() == ".mat":
         return read_trial_mat(path, min_samples=min_samples)
     stem = Path(path)
     if stem.suffix in (".csv", ".json"):
@@ -279,7 +279,9 @@ def finish_trial(meta: dict, arrays: dict, name: str, filled: list, where, *,
 def read_trials(source, *, min_samples: int = MIN_SAMPLES) -> list[Trial]:
     """Read every trial of a folder (``*.csv`` and ``*.mat``) or of a list of paths.
 
-    A stem present both as ``NAME.csv`` and ``NAME.mat`` is refused as ambiguous.
+    A stem present both as ``NAME.csv`` and ``NAME.mat`` is refused as ambiguous. A ``.mat``
+    file of NLID ``nldat`` objects gives one trial per object (trialformat.nlid); names that
+    repeat across files become ``FILE:VAR``.
     """
     if isinstance(source, (str, os.PathLike)) and Path(source).is_dir():
         csv_paths = sorted(Path(source).glob("*.csv"))
@@ -298,7 +300,20 @@ def read_trials(source, *, min_samples: int = MIN_SAMPLES) -> list[Trial]:
         paths = [Path(p) for p in source]
         if not paths:
             raise TrialFormatError("no trial given (empty list of paths)")
-    return [read_trial(p, min_samples=min_samples) for p in paths]
+    from .matlab import read_trials_mat, split_variable
+    trials, origin = [], []
+    for p in paths:
+        if split_variable(p)[0].suffix.lower() == ".mat":
+            got = read_trials_mat(p, min_samples=min_samples)
+        else:
+            got = [read_trial(p, min_samples=min_samples)]
+        trials += got
+        origin += [split_variable(p)[0].stem] * len(got)
+    names = [t.name for t in trials]
+    for t, stem in zip(trials, origin):
+        if names.count(t.name) > 1 and t.name != stem:
+            t.name = f"{stem}:{t.name}"
+    return trials
 
 
 def _read_metadata(json_path: Path) -> tuple[dict, list[str]]:
