@@ -48,6 +48,10 @@ def _analysis_arguments(p, truth_default="none") -> None:
     g.add_argument("--leakage-correction", choices=("auto", "on", "off"), default="auto",
                    help="model the Hann window's leakage in the fit (auto: where possible)")
     g.add_argument("--raw", action="store_true", help="both corrections off")
+    g.add_argument("--reflex", action="store_true",
+                   help="also fit intrinsic K, B, I + a reflex pathway (delayed velocity, "
+                        "half-wave rectified, 2nd-order low-pass) to each one-joint trial "
+                        "in the time domain (estimation.reflex; docs/estimation.md)")
     g.add_argument("--pool", action="store_true",
                    help="average the spectra of unlabelled recordings of the same set-up "
                         "(by default each is estimated alone)")
@@ -92,7 +96,8 @@ def options_from(args) -> AnalysisOptions:
         method=args.method, band_hz=tuple(args.band) if args.band else None,
         nperseg=args.nperseg, noverlap=args.noverlap, nfft=args.nfft, window=args.window,
         sampling_correction="off" if args.raw else args.sampling_correction,
-        leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool)
+        leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool,
+        reflex=getattr(args, "reflex", False))
     options.check()
     return options
 
@@ -170,6 +175,7 @@ def describe(r) -> str:
         lines.append(text)
     lines.append(f"  (± : {conf} % confidence intervals)")
     lines += [f"  warning: {w}" for w in r.warnings]
+    lines += [x.describe() for x in (r.reflex or [])]
     return "\n".join(lines)
 
 

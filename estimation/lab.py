@@ -42,6 +42,8 @@ class AnalysisOptions:
     pool : average the spectra of every trial of a set, labelled or not
     confidence : level of the intervals
     coherence_min, r2_min, ci_max_rel : thresholds of the warnings
+    reflex : also fit the intrinsic + reflex (parallel-cascade) model of each one-joint
+        trial (estimation.reflex; a ReflexOptions, or True for its defaults)
     """
 
     method: str = "auto"
@@ -57,6 +59,7 @@ class AnalysisOptions:
     coherence_min: float = 0.5
     r2_min: float = 0.9
     ci_max_rel: float = 0.25
+    reflex: object = False
 
     def check(self) -> None:
         if self.method != "auto" and self.method not in METHODS:
@@ -126,6 +129,7 @@ class LabResult:
     coherence_band: np.ndarray
     warnings: list = field(default_factory=list)
     errors_pct: dict | None = None
+    reflex: list | None = None  # estimation.reflex.ReflexResult per trial, when asked
 
     def parameters(self) -> dict:
         """``{"M"|"B"|"K": {"value", "ci", "unit", "name"}}`` with (n, n) nested lists."""
@@ -146,6 +150,8 @@ class LabResult:
                "warnings": self.warnings}
         if self.errors_pct is not None:
             out["errors_pct"] = {k: v.tolist() for k, v in self.errors_pct.items()}
+        if self.reflex is not None:
+            out["reflex"] = [r.to_json() for r in self.reflex]
         return out
 
     def frf_table(self, f_max=None) -> dict:
@@ -307,6 +313,9 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
     if truth is not None:
         result.errors_pct = {p: 100 * v for p, v in fit.relative_errors(*truth).items()}
     result.warnings = fit_warnings(result, options)
+    if options.reflex:
+        from .reflex import reflex_of_unit
+        result.reflex = reflex_of_unit(usable, options.reflex)
     return result
 
 
