@@ -201,10 +201,11 @@ def _prepare(theta, tau, fs, options) -> _Work:
     vel = np.gradient(th, 1.0 / fw)
     acc = np.gradient(vel, 1.0 / fw)
     skip = int(np.ceil(options.skip_s * fw)) + int(np.ceil(options.delay_ms[1] * 1e-3 * fw)) + 2
-    if th.size - skip < 50 * options.segments:
-        raise EstimationError(f"reflex fit: {th.size} working samples ({fw:g} Hz) are too "
-                              f"few for {options.segments} jackknife blocks after the first "
-                              f"{skip}; record longer or lower 'segments'")
+    if th.size - skip < fw * options.segments:  # at least 1 s per jackknife block
+        raise EstimationError(f"reflex fit: {(th.size - skip) / fw:.3g} s of data after the "
+                              f"first {skip / fw:.3g} s are too few for "
+                              f"{options.segments} jackknife blocks of at least 1 s; record "
+                              f"longer or lower 'segments'")
     return _Work(fw, th, vel, acc, tq, skip)
 
 
