@@ -27,8 +27,8 @@ squares in the time domain:
 3. A grid over ``d`` (every working sample in ``delay_ms``), ``f_c`` (log grid in
    ``cutoff_hz``) and ``zeta`` (grid in ``damping``), for each rectification, gives the
    global minimum of the residual; ``scipy.optimize.least_squares`` then refines
-   ``(d, f_c, zeta)`` continuously from it (the delay between samples by linear
-   interpolation). No random start, no dependence on a starting point: the same data give
+   ``(d, f_c, zeta)`` continuously from it (Levenberg-Marquardt; the delay between samples
+   by linear interpolation). No random start, no dependence on a starting point: the same data give
    the same numbers.
 4. **Intervals**: delete-one-segment jackknife. The usable samples are split into
    ``segments`` contiguous blocks; the whole fit (grid and refinement) is repeated with
@@ -220,10 +220,12 @@ def _nonlinearity(vel, rectify):
 def _lowpass(u, fc, zeta, fs):
     """Unit-DC-gain 2nd-order low-pass, Tustin with the natural frequency prewarped."""
     from scipy import signal
-    wn = 2 * np.pi * fc
-    wd = 2 * fs * np.tan(wn / (2 * fs))  # prewarped
-    b, a = signal.bilinear([wd * wd], [1.0, 2 * zeta * wd, wd * wd], fs)
-    return signal.lfilter(b, a, u)
+    c = 2 * fs
+    wd = c * np.tan(np.pi * fc / fs)  # prewarped 2 pi fc
+    w2, zc = wd * wd, 2 * zeta * wd * c  # s = c (1 - 1/z) / (1 + 1/z) in the analog filter
+    a0 = c * c + zc + w2
+    den = np.array([1.0, (2 * w2 - 2 * c * c) / a0, (c * c - zc + w2) / a0])
+    return signal.lfilter(np.array([1.0, 2.0, 1.0]) * (w2 / a0), den, u)
 
 
 def _delayed(x, d_samples):
@@ -291,7 +293,7 @@ def _grid_search(w: _Work, design: _Design, rectify, options):
     nfft = 1 << int(np.ceil(np.log2(n + d_hi + 1)))
     stack = np.vstack([design.r0, design.Q.T, design.mask])  # (6, N)
     stack_f = np.fft.rfft(stack, nfft, axis=1)
-    rr = float(design.r0 @ design.r0)
+    rr = float(_ein("n,n->", design.r0, design.r0))
     u = _nonlinearity(w.vel, rectify)
     best = (np.inf, None, None, None)
     for fc in np.geomspace(*options.cutoff_hz, 12):
@@ -317,33 +319,61 @@ def _reflex_column(w: _Work, mode, d, fc, zeta):
 
 
 def _refine(w: _Work, design: _Design, mode, p0, options):
-    """Continuous (d [samples], log fc, log zeta) from p0 by least squares."""
-    from scipy.optimize import least_squares
+    """Continuous (d [samples], log fc, log zeta) from p0: Levenberg-Marquardt on the
+    projected residual, forward-difference Jacobian, steps clipped to the search ranges."""
     lo = np.array([options.delay_ms[0] * 1e-3 * w.fs, np.log(options.cutoff_hz[0]),
                    np.log(options.damping[0])])
     hi = np.array([options.delay_ms[1] * 1e-3 * w.fs,
                    np.log(min(options.cutoff_hz[1], 0.45 * w.fs)), np.log(options.damping[1])])
-    p0 = np.clip(p0, lo + 1e-9, hi - 1e-9)
     rows = design.rows
+    r0 = design.r0[rows]
 
-    def resid(p):
-        xp = design.project_out(_reflex_column(w, mode, p[0], np.exp(p[1]), np.exp(p[2])))
-        xx = float(xp @ xp)
-        g = float(xp @ design.r0) / xx if xx > 0 else 0.0
-        return (design.r0 - g * xp)[rows]
+    def resid(q):
+        xp = design.project_out(_reflex_column(w, mode, q[0], np.exp(q[1]),
+                                               np.exp(q[2])))[rows]
+        xx = float(_ein("n,n->", xp, xp))
+        g = float(_ein("n,n->", xp, r0)) / xx if xx > 0 else 0.0
+        return r0 - g * xp
 
-    start = resid(p0)
-    sol = least_squares(resid, p0, bounds=(lo, hi), x_scale=np.array([1.0, 0.1, 0.1]),
-                        diff_step=1e-4, xtol=1e-10, ftol=1e-12, max_nfev=100)
-    return sol.x if 2 * sol.cost <= float(start @ start) else p0
+    p = np.clip(np.asarray(p0, dtype=float), lo, hi)
+    f = resid(p)
+    cost = float(_ein("n,n->", f, f))
+    h = np.array([0.01, 1e-3, 1e-3])
+    lam = 1e-3
+    for _ in range(50):
+        J = np.empty((f.size, 3))
+        for k in range(3):
+            step = np.zeros(3)
+            step[k] = h[k] if p[k] + h[k] <= hi[k] else -h[k]
+            J[:, k] = (resid(p + step) - f) / step[k]
+        JTJ = _ein("nk,nj->kj", J, J)
+        grad = _ein("nk,n->k", J, f)
+        improved = False
+        for _ in range(12):
+            A = JTJ + lam * np.diag(np.diag(JTJ) + 1e-300)
+            pn = np.clip(p - np.linalg.solve(A, grad), lo, hi)
+            fn = resid(pn)
+            cn = float(_ein("n,n->", fn, fn))
+            if cn < cost:
+                improved = True
+                break
+            lam *= 4.0
+        if not improved:
+            break
+        done = cost - cn <= 1e-12 * cost and np.all(np.abs(pn - p) <= 1e-6 * np.maximum(1, np.abs(p)))
+        small = np.all(np.abs(pn - p) <= np.array([1e-4, 1e-6, 1e-6]))
+        p, f, cost, lam = pn, fn, cn, max(lam / 3.0, 1e-9)
+        if done or small:
+            break
+    return p
 
 
 def _values(w: _Work, design: _Design, mode, p):
     d, fc, zeta = p[0], float(np.exp(p[1])), float(np.exp(p[2]))
     x = _reflex_column(w, mode, d, fc, zeta)
     xp = design.project_out(x)
-    xx = float(xp @ xp)
-    g = float(xp @ design.r0) / xx if xx > 0 else 0.0
+    xx = float(_ein("n,n->", xp, xp))
+    g = float(_ein("n,n->", xp, design.r0)) / xx if xx > 0 else 0.0
     k, b, i, _ = design.coefficients(w.tq - g * x)
     return {"K": float(k), "B": float(b), "I": float(i), "G": g,
             "delay_ms": float(1e3 * d / w.fs), "cutoff_hz": fc, "damping": zeta}
