@@ -488,8 +488,13 @@ def reflex_warnings(r: ReflexResult, options: ReflexOptions) -> list:
                    f"{r.ci['G']:.2g} {UNITS['G']}")
     for p, rng in (("delay_ms", options.delay_ms), ("cutoff_hz", options.cutoff_hz),
                    ("damping", options.damping)):
-        if np.isclose(r.values[p], rng[0], rtol=1e-3) or np.isclose(r.values[p], rng[1],
-                                                                    rtol=1e-3):
+        if p == "delay_ms" and np.isclose(r.values[p], rng[0], rtol=1e-3):
+            out.append(f"reflex delay at the shortest allowed, {rng[0]:g} ms: the "
+                       f"'reflex' pathway is not a stretch reflex here (it takes up a part "
+                       f"of the response the K-B-I model lacks, and K, B, I move with it); "
+                       f"no reflex identified in {rng[0]:g}-{rng[1]:g} ms")
+        elif np.isclose(r.values[p], rng[0], rtol=1e-3) or np.isclose(r.values[p], rng[1],
+                                                                      rtol=1e-3):
             out.append(f"{p} = {r.values[p]:.4g} is at the edge of its search range {rng}: "
                        f"widen the range")
     if not r.resists_stretch and gain >= 1.0:
