@@ -61,6 +61,10 @@ def _analysis_arguments(p, truth_default="none") -> None:
     g.add_argument("--leakage-correction", choices=("auto", "on", "off"), default="auto",
                    help="model the Hann window's leakage in the fit (auto: where possible)")
     g.add_argument("--raw", action="store_true", help="both corrections off")
+    g.add_argument("--reflex", action="store_true",
+                   help="also fit intrinsic K, B, I + a reflex pathway (delayed velocity, "
+                        "half-wave rectified, 2nd-order low-pass) to each one-joint trial "
+                        "in the time domain (estimation.reflex; docs/estimation.md)")
     g.add_argument("--pool", action="store_true",
                    help="average the spectra of unlabelled recordings of the same set-up "
                         "(by default each is estimated alone)")
@@ -107,14 +111,14 @@ def options_from(args):
         nperseg=args.nperseg, noverlap=args.noverlap, nfft=args.nfft, window=args.window,
         sampling_correction="off" if args.raw else args.sampling_correction,
         leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool,
-        weighting=args.weighting, segments=args.segments)
+        weighting=args.weighting, segments=args.segments,
+        reflex=getattr(args, "reflex", False))
     options.check()
     return options
 
 
 def _truth(name, n):
     if name == "table1":
-        from trialformat import reference as ref
         if n != 2:
             raise ValueError(f"--truth table1 is a 2-joint arm; these trials have {n} joints")
         return tf.reference.arm_matrices()
@@ -242,6 +246,7 @@ def describe(r) -> str:
                 f"{symbol(p, r.n_dof)} {rng[p][0][i][k]:.4g}...{rng[p][1][i][k]:.4g}"
                 for p in "KBM"))
     lines += [f"  warning: {w}" for w in r.warnings]
+    lines += [x.describe() for x in (r.reflex or [])]
     return "\n".join(lines)
 
 

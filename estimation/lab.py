@@ -59,6 +59,8 @@ class AnalysisOptions:
     pool : average the spectra of every trial of a set, labelled or not
     confidence : level of the intervals
     coherence_min, r2_min, ci_max_rel : thresholds of the warnings
+    reflex : also fit the intrinsic + reflex (parallel-cascade) model of each one-joint
+        trial (estimation.reflex; a ReflexOptions, or True for its defaults)
     """
 
     method: str = "auto"
@@ -79,6 +81,7 @@ class AnalysisOptions:
     coherence_min: float = 0.5
     r2_min: float = 0.9
     ci_max_rel: float = 0.25
+    reflex: object = False
 
     def check(self) -> None:
         if self.method != "auto" and self.method not in METHODS:
@@ -159,6 +162,7 @@ class LabResult:
     sensitivity: dict | None = None
     segments: list = field(default_factory=list)
     flags: list = field(default_factory=list)
+    reflex: list | None = None  # estimation.reflex.ReflexResult per trial, when asked
 
     def parameters(self) -> dict:
         """``{"M"|"B"|"K": {"value", "ci", "unit", "name"}}`` with (n, n) nested lists."""
@@ -182,6 +186,8 @@ class LabResult:
                "warnings": self.warnings}
         if self.errors_pct is not None:
             out["errors_pct"] = {k: v.tolist() for k, v in self.errors_pct.items()}
+        if self.reflex is not None:
+            out["reflex"] = [r.to_json() for r in self.reflex]
         return out
 
     @property
@@ -448,6 +454,9 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
         if w.startswith(("non-physical", "poor fit", "torque sign", "time-varying",
                          "band-sensitive"))))
     result.warnings += band_suggestion(result, options)
+    if options.reflex:
+        from .reflex import reflex_of_unit
+        result.reflex = reflex_of_unit(usable, options.reflex)
     return result
 
 

@@ -61,6 +61,9 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
             names += write_frf(r, tmp / f"frf_{stem}")
             names.append(_save(bode(r), tmp / f"bode_{stem}.png"))
         names += write_parameters(results, tmp)
+        if any(getattr(r, "reflex", None) for r in results):
+            from .reflex import write_reflex_tables
+            names += write_reflex_tables(results, tmp)
         doc = {"options": options or {}, "results": [r.to_json() for r in results]}
         names.append(_text(tmp / "results.json", json.dumps(doc, indent=1)))
         os.chmod(tmp, 0o777 & ~current_umask())

@@ -19,8 +19,8 @@ _EXPORTS = {
     "is_mat": ".matlab", "read_trial_mat": ".matlab", "read_trials_mat": ".matlab",
     "write_trial_mat": ".matlab",
 }
-_SUBMODULES = ("cliargs", "csvtable", "errors", "logs", "matlab", "processes", "reference",
-               "tempdirs")
+_SUBMODULES = ("cliargs", "csvtable", "errors", "logs", "matlab", "nlid", "processes",
+               "reference", "tempdirs")
 
 __all__ = ["reference", *_EXPORTS]
 

@@ -331,8 +331,8 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
         On anything log-format.md tells a reader to refuse; the message names the file and
         the 1-based data row, column or key.
     """
-    if Path(path).suffix.lower() == ".mat":
-        from .matlab import read_trial_mat
+    from .matlab import read_trial_mat, split_variable
+    if split_variable(path)[0].suffix.lower() == ".mat":
         return read_trial_mat(path, min_samples=min_samples)
     stem = trial_stem(path)
     json_path = with_ending(stem, ".json")
@@ -399,7 +399,8 @@ def read_trials(source, *, min_samples: int = MIN_SAMPLES) -> list[Trial]:
 
     A stem present in two forms (``NAME.csv``, ``NAME.csv.gz``, ``NAME.mat``) is refused
     as ambiguous. A ``.mat`` holding a struct array of trials gives one trial per element
-    (:func:`trialformat.matlab.read_trials_mat`).
+    (:func:`trialformat.matlab.read_trials_mat`), a ``.mat`` of NLID ``nldat`` objects one
+    trial per object (trialformat.nlid); names that repeat across files become ``FILE:VAR``.
     """
     if isinstance(source, (str, os.PathLike)) and Path(source).is_dir():
         paths = folder_trials(source)
@@ -412,13 +413,19 @@ def read_trials(source, *, min_samples: int = MIN_SAMPLES) -> list[Trial]:
         paths = [Path(p) for p in source]
         if not paths:
             raise TrialFormatError("no trial given (empty list of paths)")
-    from .matlab import read_trials_mat
-    trials = []
+    from .matlab import read_trials_mat, split_variable
+    trials, origin = [], []
     for p in paths:
-        if Path(p).suffix.lower() == ".mat":
-            trials += read_trials_mat(p, min_samples=min_samples)
+        if split_variable(p)[0].suffix.lower() == ".mat":
+            got = read_trials_mat(p, min_samples=min_samples)
         else:
-            trials.append(read_trial(p, min_samples=min_samples))
+            got = [read_trial(p, min_samples=min_samples)]
+        trials += got
+        origin += [split_variable(p)[0].stem] * len(got)
+    names = [t.name for t in trials]
+    for t, stem in zip(trials, origin):
+        if names.count(t.name) > 1 and t.name != stem:
+            t.name = f"{stem}:{t.name}"
     return trials
 
 

@@ -67,8 +67,19 @@ def read_trial_mat(path, *, min_samples: int = MIN_SAMPLES) -> Trial:
     trialformat.TrialFormatError
         The content breaks log-format.md (non-finite values, bad t, fs, perturbed_dof...).
     """
-    path = Path(path)
-    found = _trial_variables(path, _load(path))
+    path, variable = split_variable(path)
+    if variable is not None:
+        return _nldat(path, variable, min_samples)[0]
+    data = _load(path, nldat_ok=True)
+    found = [] if data is None else _trial_variables(path, data)
+    if not found:  # NLID nldat objects, or a refusal listing the variables and classes
+        trials = _nldat(path, None, min_samples, loaded=data)
+        if len(trials) > 1:
+            names = ", ".join(t.name for t in trials)
+            raise MatFileError(f"{path}: holds {len(trials)} nldat recordings ({names}); "
+                               f"read them all with read_trials, or one as "
+                               f"{path.name}:{trials[0].name}")
+        return trials[0]
     if len(found) > 1:
         raise MatFileError(f"{path}: struct array '{found[0][0].split('(')[0]}' holds "
                            f"{len(found)} trials; read the file with read_trials (armimp "
@@ -78,13 +89,20 @@ def read_trial_mat(path, *, min_samples: int = MIN_SAMPLES) -> Trial:
 
 
 def read_trials_mat(path, *, min_samples: int = MIN_SAMPLES) -> list[Trial]:
-    """Every trial of ``NAME.mat``: one (top-level variables or one struct), or one per
-    element of a struct array ``S`` (named ``NAME.S(i)``, 1-based as in MATLAB).
+    """Every trial of ``NAME.mat``: one (top-level variables or one struct), one per
+    element of a struct array ``S`` (named ``NAME.S(i)``, 1-based as in MATLAB), or one
+    per NLID ``nldat`` object (trialformat.nlid); ``FILE.mat:VAR`` reads one object.
 
-    Raises as :func:`read_trial_mat`, naming the struct element.
+    Raises as :func:`read_trial_mat`, naming the struct element; a file that is none of
+    these layouts is refused with the list of the variables and classes it holds.
     """
-    path = Path(path)
-    found = _trial_variables(path, _load(path))
+    path, variable = split_variable(path)
+    if variable is not None:
+        return _nldat(path, variable, min_samples)
+    data = _load(path, nldat_ok=True)
+    found = [] if data is None else _trial_variables(path, data)
+    if not found:
+        return _nldat(path, None, min_samples, loaded=data)
     if len(found) == 1:
         label, data = found[0]
         return [_trial_from(path, label, data, path.stem, min_samples)]
@@ -108,7 +126,8 @@ def _trial_from(path, label, data, name, min_samples) -> Trial:
 def _trial_variables(path: Path, data: dict) -> list:
     """``[(label, variables)]``: ``[(None, data)]`` for top-level variables, else the one
     struct (``label`` its name) or the elements of the one struct array (``S(1)``...)
-    holding a field ``t``. Anything else is refused naming the variables found."""
+    holding a field ``t``; ``[]`` when there is none (structs without ``t`` are refused
+    naming their fields)."""
     user = {k: v for k, v in data.items() if not k.startswith("__")}
     if "t" in user:
         return [(None, user)]
@@ -139,20 +158,64 @@ def _trial_variables(path: Path, data: dict) -> list:
         raise MatFileError(f"{path}: no variable 't' at the top level, and no struct with "
                            f"a field 't' ({descr}); a trial needs t, theta, tau_h (and "
                            f"tau_delta, tau_m) as variables or as the fields of one struct")
-    raise MatFileError(f"{path}: variable 't' missing (variables: "
-                       f"{', '.join(sorted(user)) or 'none'})")
+    return []  # the caller tries NLID objects, else refuses listing variables and classes
 
 
-def _load(path: Path) -> dict:
+def split_variable(path):
+    """``("FILE.mat", "VAR")`` for ``FILE.mat:VAR``, else ``(path, None)``."""
+    text = str(path)
+    head, sep, var = text.rpartition(":")
+    if sep and head.lower().endswith(".mat") and var and "/" not in var and "\\" not in var:
+        return Path(head), var
+    return Path(path), None
+
+
+def _nldat(path, variable, min_samples, loaded=None) -> list:
+    """Trials of the nldat objects of ``path``; refuses, listing the file's variables and
+    their classes, a file that holds none (and no ``t`` of the plain layout)."""
+    from . import nlid
+    if not path.is_file():
+        raise MatFileError(f"{path}: file missing")
+    inv = nlid.inventory(path)
+    if nlid.holds_nldat(inv):
+        return nlid.read_nldat_trials(path, variable=variable, min_samples=min_samples)
+    if variable is not None:
+        raise MatFileError(f"{path}: no nldat variable {variable!r}; it holds "
+                           f"{nlid.describe_inventory(inv)}")
+    listing = nlid.describe_inventory(inv) if inv else (
+        ", ".join(f"{k} ({type(v).__name__})" for k, v in (loaded or {}).items()
+                  if not k.startswith("__")) or "(no variable)")
+    raise MatFileError(
+        f"{path}: neither a trial (variables t, theta, tau_h, ... and meta: docs/estimation.md, "
+        f"'The .mat layout') nor NLID nldat objects; it holds: {listing}")
+
+
+def _load(path: Path, *, nldat_ok: bool = False) -> dict | None:
+    """The variables of the file; with ``nldat_ok``, None where scipy/h5py cannot read it
+    (the caller then tries the NLID reader, which lists what the file holds)."""
     if not path.is_file():
         raise MatFileError(f"{path}: file missing")
     if _is_hdf5(path):  # v7.3
         return _load_hdf5(path)
     try:
-        return sio.loadmat(path, simplify_cells=True)
+        import warnings
+        with warnings.catch_warnings():  # MCOS objects (nldat) make scipy warn of "None"
+            warnings.simplefilter("ignore", sio.matlab.MatReadWarning)
+            data = sio.loadmat(path, simplify_cells=True)
     except (ValueError, OSError, TypeError, NotImplementedError,
             sio.matlab.MatReadError) as exc:
+        if nldat_ok:
+            from . import nlid
+            inv = nlid.inventory(path)
+            if nlid.holds_nldat(inv):
+                return None
+            if inv:
+                raise MatFileError(f"{path}: scipy cannot read it ({exc}); it holds "
+                                   f"{nlid.describe_inventory(inv)}") from None
         raise MatFileError(f"{path}: not a readable MATLAB file (v4-v7.3): {exc}") from None
+    if nldat_ok and "None" in data and "t" not in data:
+        return None  # opaque class objects only
+    return data
 
 
 def _is_hdf5(path: Path) -> bool:

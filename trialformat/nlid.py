@@ -1,0 +1,313 @@
+"""Recordings stored as NLID toolbox ``nldat`` objects in MATLAB ``.mat`` files.
+
+The NLID toolbox of the Kearney lab (reklab/reklab_public) stores a recording as a MATLAB
+class object ``nldat`` (opaque MCOS data, which ``scipy.io.loadmat`` cannot read). This
+module reads them with mat-io (``matio.load_from_mat``, BSD-3). Each object's properties
+used here:
+
+``dataSet`` (N, channels)
+    the samples, one column per channel;
+``chanNames`` (1, channels) cell of char
+    channel names, mapped to the trial's columns (below);
+``domainIncr`` [s]
+    the sampling interval: ``fs = 1 / domainIncr``;
+``domainStart`` [s], ``comment``
+    kept in the metadata's ``source``.
+
+Channel mapping (default): a name ``pos``, ``pos1``, ``pos2``... (also ``angle``,
+``theta``) is the measured angle ``theta[j]`` [rad] of joint j (j the trailing digits, 1
+if none); ``tq``, ``tq1``... (also ``torque``, ``tau``) is the interaction torque
+``tau_h[j]`` [N m]. A sidecar ``NAME.json`` beside ``NAME.mat`` may declare the mapping and
+the conventions::
+
+    {"channels": {"pos1": "theta[1]", "tq1": "tau_h[1]", "ref": "theta_ref[1]"},
+     "torque_sign": -1,
+     "meta": {"posture_deg": [0.0]},
+     "variables": {"z_pf": {"torque_sign": -1, "meta": {"condition": "pf"}}}}
+
+``channels`` maps a channel name to ``theta[j]``, ``tau_h[j]``, ``theta_ref[j]``,
+``tau_delta[j]``, ``tau_m[j]`` or ``null`` (ignored); ``torque_sign`` is
+``sensors.torque_sign`` of log-format.md (-1: the file's torque has the opposite sign);
+``meta`` is merged into every trial's metadata; ``variables`` holds the same keys for one
+object. Channels not mapped are kept as extra columns.
+
+Every recording is a position perturbation of joint 1..n (``perturbation.kind:
+position``), the measured angle being the perturbation unless a ``theta_ref`` channel is
+mapped. A file holding several ``nldat`` objects gives one trial per object, named by the
+variable (``z_df``; ``FILE:VAR`` selects one).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+from .errors import MatFileError
+from .logs import FORMAT, MIN_SAMPLES, SIGNALS, complete_metadata, finish_trial
+
+NLDAT = "nldat"
+TARGETS = SIGNALS + ("theta_ref",)
+_DEFAULT_NAMES = {"theta": re.compile(r"^(?:pos|angle|theta|position)_?(\d*)$", re.I),
+                  "tau_h": re.compile(r"^(?:tq|torque|tau|trq)_?(\d*)$", re.I)}
+_TARGET = re.compile(r"^(" + "|".join(TARGETS) + r")\[(\d+)\]$")
+SIDECAR_KEYS = ("channels", "torque_sign", "meta", "variables")
+
+
+def inventory(path) -> dict:
+    """``{name: (shape, class)}`` of every variable of a ``.mat`` file (mat-io's whosmat).
+
+    Returns an empty dict when mat-io cannot list the file.
+    """
+    try:
+        from matio import whosmat
+        return {str(k): (tuple(v[0]), str(v[1])) for k, v in whosmat(str(path)).items()}
+    except Exception:  # noqa: BLE001 - a listing is only used to explain a refusal
+        return {}
+
+
+def describe_inventory(inv: dict) -> str:
+    """``z_df (1x1 nldat), t (1x60000 double)``, or ``(no variable could be listed)``."""
+    if not inv:
+        return "(no variable could be listed)"
+    return ", ".join(f"{k} ({'x'.join(str(s) for s in shape)} {cls})"
+                     for k, (shape, cls) in inv.items())
+
+
+def holds_nldat(inv: dict) -> bool:
+    return any(cls == NLDAT for _, cls in inv.values())
+
+
+def read_nldat_trials(path, *, variable: str | None = None,
+                      min_samples: int = MIN_SAMPLES) -> list:
+    """Read every ``nldat`` object of ``path`` (or only ``variable``) as a Trial.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``NAME.mat`` (v5/v7 or v7.3); an optional sidecar ``NAME.json`` (module docstring).
+    variable : str or None
+        Read this variable only.
+    min_samples : int
+        Fewest samples a trial may have (one spectral segment).
+
+    Returns
+    -------
+    list of trialformat.Trial, in the file's variable order: ``theta``, ``tau_h`` (N, n),
+    ``t = arange(N) / fs``, metadata with ``fs = 1/domainIncr``, ``n_dof`` = number of
+    joints mapped, ``perturbation.kind = "position"``, ``source`` naming the file, object
+    and comment.
+
+    Raises
+    ------
+    MatFileError
+        The file does not load, holds no ``nldat`` (the message lists its variables and
+        classes), a channel maps to nothing usable, ``domainIncr`` is not positive, or the
+        sidecar is malformed (naming the key).
+    """
+    path = Path(path)
+    sidecar = _sidecar(path)
+    try:
+        from matio import load_from_mat
+        data = load_from_mat(str(path))
+    except Exception as exc:  # noqa: BLE001 - mat-io raises many types; name the file
+        raise MatFileError(f"{path}: mat-io cannot read it: {exc}") from None
+    objects = {k: v for k, v in data.items() if getattr(v, "classname", None) == NLDAT}
+    if not objects:
+        raise MatFileError(f"{path}: holds no nldat object; its variables: "
+                           f"{describe_inventory(inventory(path))}")
+    if variable is not None:
+        if variable not in objects:
+            raise MatFileError(f"{path}: no nldat variable {variable!r}; nldat objects: "
+                               f"{', '.join(objects)}")
+        objects = {variable: objects[variable]}
+    unknown = sorted(set(sidecar.get("variables") or {}) - set(data))
+    if unknown:
+        raise MatFileError(f"{path.with_suffix('.json')}: key 'variables' names "
+                           f"{unknown}, not in the file (it holds {', '.join(data)})")
+    return [_trial(path, name, obj, _settings(sidecar, name), min_samples)
+            for name, obj in objects.items()]
+
+
+def _sidecar(path: Path) -> dict:
+    side = path.with_suffix(".json")
+    if not side.is_file():
+        return {}
+    try:
+        doc = json.loads(side.read_text(encoding="utf-8-sig"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise MatFileError(f"{side}: JSON does not parse: {exc}") from None
+    if not isinstance(doc, dict):
+        raise MatFileError(f"{side}: must be a JSON object with keys {list(SIDECAR_KEYS)}")
+    bad = sorted(set(doc) - set(SIDECAR_KEYS))
+    if bad:
+        raise MatFileError(f"{side}: unknown key(s) {bad} for an nldat file (known: "
+                           f"{list(SIDECAR_KEYS)}; the trial metadata goes under 'meta')")
+    for key, kind in (("channels", dict), ("meta", dict), ("variables", dict)):
+        if key in doc and not isinstance(doc[key], kind):
+            raise MatFileError(f"{side}: key '{key}' must be a JSON object")
+    for name, sub in (doc.get("variables") or {}).items():
+        if not isinstance(sub, dict) or set(sub) - {"channels", "torque_sign", "meta"}:
+            raise MatFileError(f"{side}: key 'variables.{name}' must be an object with "
+                               f"keys among channels, torque_sign, meta")
+    doc["_where"] = str(side)
+    return doc
+
+
+def _settings(sidecar: dict, name: str) -> dict:
+    own = (sidecar.get("variables") or {}).get(name, {})
+    meta = copy.deepcopy(sidecar.get("meta") or {})
+    meta.update(copy.deepcopy(own.get("meta") or {}))
+    channels = dict(sidecar.get("channels") or {})
+    channels.update(own.get("channels") or {})
+    sign = own.get("torque_sign", sidecar.get("torque_sign"))
+    where = sidecar.get("_where", "")
+    if sign is not None and sign not in (1, -1):
+        raise MatFileError(f"{where}: key 'torque_sign' must be 1 or -1, got {sign!r}")
+    return {"meta": meta, "channels": channels, "torque_sign": sign, "where": where}
+
+
+def _text(value) -> str:
+    """A MATLAB char array (as mat-io returns it: nested arrays of str) as one string."""
+    arr = np.asarray(value, dtype=object).ravel()
+    parts = []
+    for a in arr:
+        if isinstance(a, np.ndarray):
+            parts.append(_text(a))
+        else:
+            parts.append(str(a))
+    return "".join(parts)
+
+
+def _names(value) -> list:
+    arr = np.asarray(value, dtype=object)
+    if arr.dtype.kind == "U":
+        return [str(s) for s in arr.ravel()]
+    return [_text(c) for c in arr.ravel()]
+
+
+def _scalar(props, key, where) -> float:
+    try:
+        value = float(np.asarray(props[key], dtype=float).ravel()[0])
+    except (KeyError, IndexError, TypeError, ValueError):
+        raise MatFileError(f"{where}: property '{key}' missing or not a number") from None
+    return value
+
+
+def _trial(path: Path, name: str, obj, settings: dict, min_samples: int):
+    where = f"{path} variable '{name}' (nldat)"
+    props = obj.properties
+    if not isinstance(props, dict) or "dataSet" not in props:
+        raise MatFileError(f"{where}: no property 'dataSet' (properties: "
+                           f"{sorted(props) if isinstance(props, dict) else props})")
+    data = np.asarray(props["dataSet"])
+    if data.dtype.kind not in "biuf":
+        raise MatFileError(f"{where}: property 'dataSet' is not numeric "
+                           f"(dtype {data.dtype})")
+    data = data.astype(float)
+    if data.ndim == 1:
+        data = data[:, None]
+    if data.ndim != 2:
+        raise MatFileError(f"{where}: property 'dataSet' has shape {data.shape}; expected "
+                           f"(samples, channels) (several realisations are not read)")
+    names = _names(props.get("chanNames", np.zeros(0)))
+    if len(names) != data.shape[1]:
+        raise MatFileError(f"{where}: {len(names)} channel names {names} for "
+                           f"{data.shape[1]} data columns")
+    incr = _scalar(props, "domainIncr", where)
+    if not np.isfinite(incr) or incr <= 0:
+        raise MatFileError(f"{where}: property 'domainIncr' must be a positive sampling "
+                           f"interval [s], got {incr!r}")
+    start = _scalar(props, "domainStart", where) if "domainStart" in props else 0.0
+    columns = _map_channels(names, settings, where)
+    joints = sorted({j for s, j in columns.values() if s in ("theta", "tau_h")})
+    for s in ("theta", "tau_h"):
+        have = sorted(j for t, j in columns.values() if t == s)
+        if not have:
+            raise MatFileError(
+                f"{where}: no channel maps to {s}[j] (channels: {names}); declare the "
+                f"mapping in {path.with_suffix('.json').name}, e.g. "
+                f'{{"channels": {{"{names[0] if names else "pos1"}": "theta[1]", ...}}}}')
+    n = max(joints)
+    for s in ("theta", "tau_h"):
+        missing = [j for j in range(1, n + 1) if (s, j) not in columns.values()]
+        if missing:
+            raise MatFileError(f"{where}: no channel for {s}{missing} (mapping: "
+                               f"{_show(columns)}); every joint 1..{n} needs theta and tau_h")
+    arrays = {"t": np.arange(data.shape[0]) * incr, "extra": {}}
+    for s in TARGETS:
+        cols = {j: c for c, (t, j) in columns.items() if t == s}
+        if cols:
+            if max(cols) > n:
+                raise MatFileError(f"{where}: channel(s) {list(cols.values())} map to "
+                                   f"{s}[{max(cols)}] beyond the {n} joint(s) with angle "
+                                   f"and torque")
+            arr = np.zeros((data.shape[0], n))
+            for j, c in cols.items():
+                arr[:, j - 1] = data[:, names.index(c)]
+            arrays[s] = arr
+    for c in names:
+        if c not in columns and settings["channels"].get(c, "") is not None:
+            arrays["extra"][c] = data[:, names.index(c)]
+    meta = _metadata(path, name, props, settings, n, incr, start, names, columns)
+    filled = complete_metadata(meta, where)
+    return finish_trial(meta, arrays, name, filled, f"{path}:{name}", min_samples=min_samples)
+
+
+def _show(columns) -> str:
+    return ", ".join(f"{c} -> {s}[{j}]" for c, (s, j) in columns.items())
+
+
+def _map_channels(names, settings, where) -> dict:
+    """``{channel: (signal, joint)}`` from the sidecar's mapping, else the default names."""
+    declared = settings["channels"]
+    unknown = sorted(set(declared) - set(names))
+    if unknown:
+        raise MatFileError(f"{settings['where']}: key 'channels' names {unknown}, not "
+                           f"channels of {where} (channels: {names})")
+    out = {}
+    for c in names:
+        if c in declared:
+            target = declared[c]
+            if target is None:
+                continue
+            m = _TARGET.match(str(target))
+            if not m or int(m.group(2)) < 1:
+                raise MatFileError(f"{settings['where']}: key 'channels.{c}' must be one "
+                                   f"of {', '.join(s + '[j]' for s in TARGETS)} (j >= 1) or "
+                                   f"null, got {target!r}")
+            out[c] = (m.group(1), int(m.group(2)))
+            continue
+        for signal, pattern in _DEFAULT_NAMES.items():
+            m = pattern.match(c)
+            if m:
+                out[c] = (signal, int(m.group(1) or 1))
+    taken = {}
+    for c, key in out.items():
+        if key in taken:
+            raise MatFileError(f"{where}: channels {taken[key]!r} and {c!r} both map to "
+                               f"{key[0]}[{key[1]}]; declare the mapping in the sidecar "
+                               f"('channels')")
+        taken[key] = c
+    return out
+
+
+def _metadata(path, name, props, settings, n, incr, start, names, columns) -> dict:
+    comment = _text(props["comment"]) if "comment" in props else ""
+    meta = {"format": FORMAT, "fs": 1.0 / incr, "n_dof": n,
+            "perturbed_dof": 1 if n == 1 else None,
+            "perturbation": {"kind": "position"},
+            "source": f"NLID nldat {path.name}:{name}"
+                      + (f" ({comment})" if comment else "")
+                      + f"; channels {_show(columns)}; domainStart {start:g} s"}
+    if settings["torque_sign"] is not None:
+        meta["sensors"] = {"torque_sign": settings["torque_sign"]}
+    for key, value in settings["meta"].items():
+        if isinstance(value, dict) and isinstance(meta.get(key), dict):
+            meta[key] = {**meta[key], **value}
+        else:
+            meta[key] = value
+    return meta
