@@ -282,7 +282,6 @@ def _info(args) -> int:
               f"(stepped at it)")
     if info["converted_units"]:
         print("units: declared units other than rad, N m, rad/s, converted by the master")
-    extra = info.get("inputs_outside_contract") or {}
     if extra:
         print(f"inputs outside the contract ({len(extra)}; the master never drives them, they "
               f"stay at these values unless set with --plant-parameter NAME=VALUE):")

@@ -14,6 +14,7 @@ perturbations are independent of each other and of the decomposition trials'.
 
 from __future__ import annotations
 
+import glob
 import json
 import time
 import traceback
@@ -205,18 +206,11 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
 def _remove_partial(out: Path, name: str) -> None:
     """Remove the temporary files of a trial whose worker was stopped while writing it
     (``.NAME.csv.*.tmp``, ``.NAME.json.*.tmp`` of the atomic writes)."""
-    for tmp in out.glob(f".{glob_escape(name)}.*.tmp"):
+    for tmp in out.glob(f".{glob.escape(name)}.*.tmp"):
         try:
             tmp.unlink()
         except OSError:
             pass
-
-
-def glob_escape(text: str) -> str:
-    """``text`` with the glob characters ``*?[`` taken literally."""
-    import glob
-
-    return glob.escape(text)
 
 
 def _once_per_process(fmu_path) -> bool:
