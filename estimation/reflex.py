@@ -26,13 +26,13 @@ squares in the time domain:
    ``[theta, theta', theta'', 1, x]``, ``x = LP[N(theta')]`` delayed by ``d``.
 3. A grid over ``d`` (every working sample in ``delay_ms``), ``f_c`` (log grid in
    ``cutoff_hz``) and ``zeta`` (grid in ``damping``), for each rectification, gives the
-   global minimum of the residual; ``scipy.optimize.least_squares`` then refines
-   ``(d, f_c, zeta)`` continuously from it (Levenberg-Marquardt; the delay between samples
-   by linear interpolation). No random start, no dependence on a starting point: the same data give
-   the same numbers.
-4. **Intervals**: delete-one-segment jackknife. The usable samples are split into
-   ``segments`` contiguous blocks; the whole fit (grid and refinement) is repeated with
-   each block left out; the half-width is ``t_{(1+c)/2, m-1} * sqrt((m-1)/m * sum (p_j -
+   global minimum of the residual (the reflex column's projection for every delay at once,
+   by FFT cross-correlation); Levenberg-Marquardt then refines ``(d, f_c, zeta)``
+   continuously from it (the delay between samples by linear interpolation). No random
+   start: the same data give the same numbers.
+4. **Intervals**: delete-one-block jackknife. The usable samples are split into
+   ``segments`` contiguous blocks; the fit is repeated with each block left out (refined
+   from the full-data optimum, same rectification); the half-width is ``t_{(1+c)/2, m-1} * sqrt((m-1)/m * sum (p_j -
    p_mean)^2)`` (Efron and Tibshirani 1993, ch. 11). Blocks keep the serial correlation of
    the residual inside them, which the Jacobian of the least squares would ignore.
 5. **VAF** [%] of the (filtered) torque, ``100 (1 - var(tq - model) / var(tq))``, for the

@@ -305,7 +305,8 @@ def _metadata(path, data, holder=None) -> dict:
 
 def _vector(path, data, name) -> np.ndarray:
     if name not in data:
-        raise MatFileError(f"{path}: variable '{name}' missing")
+        raise MatFileError(f"{path}: variable '{name}' missing; the file holds "
+                           f"{_holds(data)}")
     arr = _numeric(path, data[name], name)
     if arr.ndim > 2 or (arr.ndim == 2 and min(arr.shape) != 1):
         raise MatFileError(f"{path}: variable '{name}' must be a vector, has shape {arr.shape}")
@@ -314,7 +315,8 @@ def _vector(path, data, name) -> np.ndarray:
 
 def _matrix(path, data, name, n_samples, n) -> np.ndarray:
     if name not in data:
-        raise MatFileError(f"{path}: variable '{name}' missing (expected {n_samples} x {n})")
+        raise MatFileError(f"{path}: variable '{name}' missing (expected {n_samples} x {n}); "
+                           f"the file holds {_holds(data)}")
     arr = _numeric(path, data[name], name)
     if arr.ndim == 1 and n == 1:
         arr = arr[:, None]
@@ -322,6 +324,19 @@ def _matrix(path, data, name, n_samples, n) -> np.ndarray:
         raise MatFileError(f"{path}: variable '{name}' has shape {arr.shape}, expected "
                            f"({n_samples}, {n}) for n_dof={n}")
     return arr
+
+
+def _holds(data) -> str:
+    """``t (60000 float64), meta (str)``: the variables as loaded, for a refusal."""
+    out = []
+    for k, v in data.items():
+        if k.startswith("__"):
+            continue
+        if isinstance(v, np.ndarray):
+            out.append(f"{k} ({'x'.join(map(str, v.shape)) or 'scalar'} {v.dtype})")
+        else:
+            out.append(f"{k} ({type(v).__name__})")
+    return ", ".join(out) or "no variable"
 
 
 def _numeric(path, value, name) -> np.ndarray:

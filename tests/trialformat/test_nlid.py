@@ -111,6 +111,12 @@ def test_bad_objects_and_foreign_files_are_refused_with_their_contents(tmp_path)
     with pytest.raises(MatFileError, match=r"neither a trial .* nor NLID nldat.*angle \(1x9000 "
                                            r"double\), torque \(1x9000 double\)"):
         tf.read_trials(other, min_samples=1000)
+    part = tmp_path / "part.mat"
+    sio.savemat(part, {"t": np.arange(N) / 1000.0, "angle": pos,
+                       "meta": json.dumps({"n_dof": 1, "fs": 1000.0})})
+    with pytest.raises(MatFileError, match=r"variable 'tau_delta' missing .*the file holds t "
+                                           r"\(9000 float64\), angle \(9000 float64\), meta"):
+        tf.read_trials(part, min_samples=1000)
 
 
 def test_folder_with_nldat_and_names_repeated_across_files(tmp_path):
