@@ -28,6 +28,8 @@ model ArmExoPlant3 "3-DOF exoskeleton (shoulder, elbow, wrist) + linear human ar
   ArmExo.Units.AngularVelocity w_arm[3](each start = 0, each fixed = true) "Arm velocities (interface compliance only)";
   ArmExo.Units.Torque tau_act[3] "Torque applied by the actuators";
   ArmExo.Units.Torque tau_link[3] "Joint torque acting on the links";
+  final parameter Real cuff_compliant = if interface_compliance.on then 1 else 0 "1: compliant cuff, 0: rigid";
+  final parameter Real cuff_rigid = 1 - cuff_compliant "1: rigid cuff, 0: compliant";
   ArmExo.Units.Torque tau_cuff[3] "Torque robot -> arm at the cuff (before the sensor lag)";
 equation
   // actuator
@@ -38,21 +40,18 @@ equation
   transmission_compliance.w_a = w_mot;
   transmission_compliance.phi_b = theta_link;
   transmission_compliance.w_b = w_link;
-  if transmission_compliance.on then
-    der(theta_mot) = w_mot;
-    robot.Jm .* der(w_mot) = tau_act - friction.tau_f - transmission_compliance.tau;
-    friction.w = w_mot;
-    tau_link = transmission_compliance.tau;
-    theta = theta_mot;
-    omega = w_mot;
-  else
-    der(theta_mot) = zeros(3);
-    der(w_mot) = zeros(3);
-    friction.w = w_link;
-    tau_link = tau_act - friction.tau_f;
-    theta = theta_link;
-    omega = w_link;
-  end if;
+  // rigid (friction on the link) or compliant (friction and encoder on the motor); the
+  // switch is a run-time parameter: every state exists, unused ones keep zero derivatives
+  for j in 1:3 loop
+    der(theta_mot[j]) = if transmission_compliance.on then w_mot[j] else 0;
+    der(w_mot[j]) = if transmission_compliance.on then
+      (tau_act[j] - friction.tau_f[j] - transmission_compliance.tau[j])/robot.Jm[j] else 0;
+    friction.w[j] = if transmission_compliance.on then w_mot[j] else w_link[j];
+    tau_link[j] = if transmission_compliance.on then transmission_compliance.tau[j]
+      else tau_act[j] - friction.tau_f[j];
+    theta[j] = if transmission_compliance.on then theta_mot[j] else theta_link[j];
+    omega[j] = if transmission_compliance.on then w_mot[j] else w_link[j];
+  end for;
   // links
   robot.theta = theta_link;
   robot.w = w_link;
@@ -63,21 +62,17 @@ equation
   interface_compliance.w_a = w_link;
   interface_compliance.phi_b = theta_arm;
   interface_compliance.w_b = w_arm;
-  if interface_compliance.on then
-    der(theta_arm) = w_arm;
-    arm.theta = theta_arm;
-    arm.w = w_arm;
-    arm.a = der(w_arm);
-    arm.tau = interface_compliance.tau;
-    tau_cuff = interface_compliance.tau;
-  else
-    der(theta_arm) = zeros(3);
-    der(w_arm) = zeros(3);
-    arm.theta = theta_link;
-    arm.w = w_link;
-    arm.a = der(w_link);
-    tau_cuff = arm.tau;
-  end if;
+  // rigid cuff: the arm moves with the link and its impedance adds M_h to the links' mass
+  // matrix; compliant: the arm has its own states. rigid = 1 - on (a run-time parameter)
+  // keeps one linear system in der(w_link), der(w_arm) for both cases
+  for j in 1:3 loop
+    der(theta_arm[j]) = if interface_compliance.on then w_arm[j] else 0;
+    arm.theta[j] = if interface_compliance.on then theta_arm[j] else theta_link[j];
+    arm.w[j] = if interface_compliance.on then w_arm[j] else w_link[j];
+    arm.a[j] = cuff_compliant*der(w_arm[j]) + cuff_rigid*der(w_link[j]);
+    tau_cuff[j] = cuff_compliant*interface_compliance.tau[j] + cuff_rigid*arm.tau[j];
+    0 = cuff_compliant*(arm.tau[j] - interface_compliance.tau[j]) + cuff_rigid*der(w_arm[j]);
+  end for;
   // torque sensor
   torque_sensor_lag.u = tau_cuff;
   tau_h = torque_sensor_lag.y;
