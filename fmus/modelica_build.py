@@ -423,22 +423,23 @@ def build_all(out_dir=None, *, cc: str | None = None, log=print) -> list[Path]:
     ExporterUnavailable
         No exporter interpreter (the caller falls back to the C plant).
     """
-    python = None
-    built = []
+    python, built, unavailable = None, [], None
     for n in sorted(MODELS):
         try:
-            exported = None
-            key = CACHE_DIR / f"{MODELS[n]}-{source_hash()[:16]}.json"
-            if not key.exists() and python is None:
+            cached = CACHE_DIR / f"{MODELS[n]}-{source_hash()[:16]}.json"
+            if not cached.exists() and python is None:
                 python = find_exporter()
             exported = export(n, python=python)
-        except ExporterUnavailable:
-            raise
+        except ExporterUnavailable as exc:
+            unavailable = exc
+            continue
         except BuildError as exc:
             log(f"note: the Modelica plant {MODELS[n]} was not exported: {exc}")
             continue
         for version in ((2, 3) if n == 2 else (2,)):
             built.append(build_fmu(out_dir, cc=cc, fmi_version=version, n=n, exported=exported))
+    if unavailable is not None and not built:
+        raise unavailable
     return built
 
 

@@ -28,8 +28,14 @@ model ArmExoPlant3 "3-DOF exoskeleton (shoulder, elbow, wrist) + linear human ar
   ArmExo.Units.AngularVelocity w_arm[3](each start = 0, each fixed = true) "Arm velocities (interface compliance only)";
   ArmExo.Units.Torque tau_act[3] "Torque applied by the actuators";
   ArmExo.Units.Torque tau_link[3] "Joint torque acting on the links";
-  final parameter Real cuff_compliant = if interface_compliance.on then 1 else 0 "1: compliant cuff, 0: rigid";
-  final parameter Real cuff_rigid = 1 - cuff_compliant "1: rigid cuff, 0: compliant";
+  final parameter Real cuff_rigid = if interface_compliance.on then 0 else 1
+    "1: rigid cuff (the arm's impedance acts on the links), 0: compliant cuff";
+  final parameter Real M_h_adj[3, 3] = [arm.M_h[2, 2]*arm.M_h[3, 3] - arm.M_h[2, 3]*arm.M_h[3, 2], arm.M_h[1, 3]*arm.M_h[3, 2] - arm.M_h[1, 2]*arm.M_h[3, 3], arm.M_h[1, 2]*arm.M_h[2, 3] - arm.M_h[1, 3]*arm.M_h[2, 2];
+      arm.M_h[2, 3]*arm.M_h[3, 1] - arm.M_h[2, 1]*arm.M_h[3, 3], arm.M_h[1, 1]*arm.M_h[3, 3] - arm.M_h[1, 3]*arm.M_h[3, 1], arm.M_h[1, 3]*arm.M_h[2, 1] - arm.M_h[1, 1]*arm.M_h[2, 3];
+      arm.M_h[2, 1]*arm.M_h[3, 2] - arm.M_h[2, 2]*arm.M_h[3, 1], arm.M_h[1, 2]*arm.M_h[3, 1] - arm.M_h[1, 1]*arm.M_h[3, 2], arm.M_h[1, 1]*arm.M_h[2, 2] - arm.M_h[1, 2]*arm.M_h[2, 1]] "Adjugate of M_h";
+  final parameter Real M_h_det = arm.M_h[1, 1]*M_h_adj[1, 1] + arm.M_h[1, 2]*M_h_adj[2, 1] + arm.M_h[1, 3]*M_h_adj[3, 1]
+    "det M_h (the compliant cuff needs M_h invertible)";
+  final parameter Real M_h_inv[3, 3] = M_h_adj/M_h_det "Inverse of M_h (used with a compliant cuff only)";
   ArmExo.Units.Torque tau_cuff[3] "Torque robot -> arm at the cuff (before the sensor lag)";
 equation
   // actuator
@@ -52,26 +58,33 @@ equation
     theta[j] = if transmission_compliance.on then theta_mot[j] else theta_link[j];
     omega[j] = if transmission_compliance.on then w_mot[j] else w_link[j];
   end for;
-  // links
+  // links: with a rigid cuff the arm moves with them and its impedance adds to their
+  // equation (cuff_rigid = 1); with a compliant cuff the cuff torque acts instead
   robot.theta = theta_link;
   robot.w = w_link;
   der(theta_link) = w_link;
-  robot.M*der(w_link) + robot.c + robot.G = tau_link - tau_cuff;
-  // cuff: rigid (the arm moves with the link) or compliant (the arm has its own states)
+  robot.M*der(w_link) + cuff_rigid*(arm.M_h*der(w_link) + arm.B_h*w_link + arm.K_h*theta_link)
+    + robot.c + robot.G = tau_link - (1 - cuff_rigid)*interface_compliance.tau;
+  // cuff and arm; interface_compliance.on is a run-time parameter: every state exists, the
+  // arm's own states keep zero derivatives with a rigid cuff
   interface_compliance.phi_a = theta_link;
   interface_compliance.w_a = w_link;
   interface_compliance.phi_b = theta_arm;
   interface_compliance.w_b = w_arm;
-  // rigid cuff: the arm moves with the link and its impedance adds M_h to the links' mass
-  // matrix; compliant: the arm has its own states. rigid = 1 - on (a run-time parameter)
-  // keeps one linear system in der(w_link), der(w_arm) for both cases
   for j in 1:3 loop
     der(theta_arm[j]) = if interface_compliance.on then w_arm[j] else 0;
+    der(w_arm[j]) = if interface_compliance.on then
+      M_h_inv[j, 1]*(interface_compliance.tau[1] - arm.B_h[1, 1]*w_arm[1] - arm.B_h[1, 2]*w_arm[2] - arm.B_h[1, 3]*w_arm[3]
+        - arm.K_h[1, 1]*theta_arm[1] - arm.K_h[1, 2]*theta_arm[2] - arm.K_h[1, 3]*theta_arm[3])
+      + M_h_inv[j, 2]*(interface_compliance.tau[2] - arm.B_h[2, 1]*w_arm[1] - arm.B_h[2, 2]*w_arm[2] - arm.B_h[2, 3]*w_arm[3]
+        - arm.K_h[2, 1]*theta_arm[1] - arm.K_h[2, 2]*theta_arm[2] - arm.K_h[2, 3]*theta_arm[3])
+      + M_h_inv[j, 3]*(interface_compliance.tau[3] - arm.B_h[3, 1]*w_arm[1] - arm.B_h[3, 2]*w_arm[2] - arm.B_h[3, 3]*w_arm[3]
+        - arm.K_h[3, 1]*theta_arm[1] - arm.K_h[3, 2]*theta_arm[2] - arm.K_h[3, 3]*theta_arm[3])
+      else 0;
     arm.theta[j] = if interface_compliance.on then theta_arm[j] else theta_link[j];
     arm.w[j] = if interface_compliance.on then w_arm[j] else w_link[j];
-    arm.a[j] = cuff_compliant*der(w_arm[j]) + cuff_rigid*der(w_link[j]);
-    tau_cuff[j] = cuff_compliant*interface_compliance.tau[j] + cuff_rigid*arm.tau[j];
-    0 = cuff_compliant*(arm.tau[j] - interface_compliance.tau[j]) + cuff_rigid*der(w_arm[j]);
+    arm.a[j] = if interface_compliance.on then der(w_arm[j]) else der(w_link[j]);
+    tau_cuff[j] = if interface_compliance.on then interface_compliance.tau[j] else arm.tau[j];
   end for;
   // torque sensor
   torque_sensor_lag.u = tau_cuff;
