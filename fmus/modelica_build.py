@@ -112,10 +112,11 @@ def find_exporter() -> str:
 def source_hash() -> str:
     """SHA-256 over the Modelica package and the exporter files (the cache key)."""
     h = hashlib.sha256(EXPORTER_VERSION.encode())
-    files = sorted(MODELICA_DIR.rglob("*.mo")) + sorted(MODELICA_DIR.rglob("package.order"))
-    files += sorted(EXPORT_DIR.glob("*.py"))
-    for f in files:
-        h.update(str(f.relative_to(REPO)).encode())
+    files = [(f, f.relative_to(MODELICA_DIR)) for f in
+             sorted(MODELICA_DIR.rglob("*.mo")) + sorted(MODELICA_DIR.rglob("package.order"))]
+    files += [(f, Path("modelica_export") / f.name) for f in sorted(EXPORT_DIR.glob("*.py"))]
+    for f, name in files:
+        h.update(str(name).encode())
         h.update(f.read_bytes())
     return h.hexdigest()
 
