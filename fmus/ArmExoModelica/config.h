@@ -17,6 +17,7 @@
 typedef struct {
     double p[NP + NU];      /* parameters in the generated code's order, then the inputs */
     double w[NOBS + 1];     /* the generated code's workspace */
+    int rigid;              /* the rigid configuration: use rhs_rigid */
 } ModelData;
 
 #endif

@@ -4,7 +4,9 @@
  * table P_OF_VR), evaluates the dependent parameters (generated: md_dependent), refuses a
  * parameter below its Modelica min attribute or a non-positive rk4_step (naming it and its
  * value), and sets the states to their start values.  model_advance: classical RK4 on
- * rhs().  model_calculateValues: observe() into the outputs (table OBS_OF_VR). */
+ * rhs(), or on rhs_rigid() (the same generated rhs with the effect switches constant, so
+ * that the compiler drops what they switch off) when the parameters give the rigid
+ * configuration.  model_calculateValues: observe() into the outputs (table OBS_OF_VR). */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -20,6 +22,14 @@ static inline void derivatives(const ModelData *d, const double *x, double *dx) 
 }
 
 RK4_DEFINE(rk4_all, NX, NX, derivatives)
+
+#if HAVE_RHS_RIGID
+static inline void derivatives_rigid(const ModelData *d, const double *x, double *dx) {
+    rhs_rigid(0.0, x, d->p, (double *)d->w, dx);
+}
+
+RK4_DEFINE(rk4_rigid, NX, NX, derivatives_rigid)
+#endif
 
 static int refuse(ModelInstance *comp, int vr, const char *why) {
     logError(comp, "parameter %s = %.17g refused: %s", VR_NAME[vr], comp->s.r[vr], why);
@@ -42,6 +52,11 @@ int model_initialize(ModelInstance *comp) {
     memcpy(d->p, P_START, sizeof P_START);
     for (int k = 0; k < N_PARAM_VR; k++) d->p[PARAM_SLOT[k]] = r[PARAM_VR[k]];
     md_dependent(d->p);
+#if HAVE_RHS_RIGID
+    d->rigid = md_is_rigid(d->p);
+#else
+    d->rigid = 0;
+#endif
     for (int k = 0; k < NP; k++) {
         if (!isfinite(d->p[k])) {
             logError(comp, "derived parameter %s = %g is not finite (check the parameters it is "
@@ -61,7 +76,12 @@ void model_latchInputs(Snapshot *s) {
     for (int k = 0; k < NU; k++) s->d.p[NP + k] = s->r[INPUT_VR[k]];
 }
 
-int model_advance(Snapshot *s, long long n) { return rk4_all(s, n); }
+int model_advance(Snapshot *s, long long n) {
+#if HAVE_RHS_RIGID
+    if (s->d.rigid) return rk4_rigid(s, n);
+#endif
+    return rk4_all(s, n);
+}
 
 void model_calculateValues(Snapshot *s) {
     double out[NOBS];

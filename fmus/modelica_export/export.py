@@ -175,6 +175,7 @@ def export(folder: Path, model: str) -> dict:
             "inputs": [{"name": v.name, "unit": v.unit, "description": v.comment} for v in inputs],
             "states": states, "observed": observed, "n_observed": 1 + max(observed.values()),
             "variables": variables,
+            "symbols": {v.name: emitter.symbols[v.name] for v in params if v.name in emitter.symbols},
             "seconds": {"flatten": t1 - t0, "causalize": t2 - t1, "emit": t3 - t2}}
 
 

@@ -30,6 +30,8 @@ model PlanarExoskeleton3DOF "Serial 3-link planar exoskeleton (shoulder, elbow, 
   final parameter ArmExo.Units.Inertia b12 = scale*(m2*L1*lc2 + m3*L1*L2);
   final parameter ArmExo.Units.Inertia b13 = scale*m3*L1*lc3;
   final parameter ArmExo.Units.Inertia b23 = scale*m3*L2*lc3;
+  final parameter Boolean tilted = beta <> 0 "Gravity acts (a run-time switch: no cosines of q1 when level)";
+  final parameter ArmExo.Units.Acceleration g_tilt = g_n*sin(beta) "In-plane gravity";
 protected
   ArmExo.Units.Angle q[3] = q0 + theta "Absolute q1, relative q2, q3";
   Real c2, c3, c23, s2, s3, s23 "cos and sin of q2, q3, q2 + q3";
@@ -54,9 +56,9 @@ equation
     - b23*s3*w[3]*(2*w[1] + 2*w[2] + w[3]);
   c[2] = (b12*s2 + b13*s23)*w[1]^2 - b23*s3*w[3]*(2*w[1] + 2*w[2] + w[3]);
   c[3] = b13*s23*w[1]^2 + b23*s3*(w[1] + w[2])^2;
-  G[3] = g_n*sin(beta)*m3*lc3*cos(q[1] + q[2] + q[3]);
-  G[2] = g_n*sin(beta)*(m2*lc2 + L2*m3)*cos(q[1] + q[2]) + G[3];
-  G[1] = g_n*sin(beta)*(m1*lc1 + L1*(m2 + m3))*cos(q[1]) + G[2];
+  G[3] = if tilted then g_tilt*m3*lc3*cos(q[1] + q[2] + q[3]) else 0;
+  G[2] = if tilted then g_tilt*(m2*lc2 + L2*m3)*cos(q[1] + q[2]) + G[3] else 0;
+  G[1] = if tilted then g_tilt*(m1*lc1 + L1*(m2 + m3))*cos(q[1]) + G[2] else 0;
   annotation (Documentation(info = "<html><p>The three-link equations of docs/spec/reference-3dof.md written out
 (M_r as printed there, the Coriolis torques from its Christoffel symbols, gravity from the
 potential energy), under the C FMU's names (robot.m3, ...): PlanarExoskeletonNDOF for n = 3,
