@@ -8,8 +8,9 @@ Also one 50 s doStep with a constant torque (the solver alone, CPU time of the t
 The two plants are run alternately, best of ``--repeat``; the ratio is exported / C.
 
 With ``--callgrind`` the instructions executed inside fmi2DoStep are counted by valgrind
-(``--toggle-collect=fmi2DoStep``) for one doStep of ``--callgrind-seconds`` of plant time:
-a figure that does not depend on the machine's load.
+(``--toggle-collect=fmi2DoStep``) for one doStep of ``--callgrind-seconds`` of plant time
+(constant torque), in a small C driver compiled from each FMU's ``sources/`` with the build's
+flags: a figure that does not depend on the machine's load.
 
 Usage: ``python bench/bench_modelica_export.py [--repeat 3] [--callgrind] [--json FILE]``.
 """
@@ -79,20 +80,74 @@ def one_call(plant: Plant, params: dict, seconds: float = T_END) -> float:
     return cpu
 
 
+_DRIVER = r"""
+/* One doStep of SECONDS with a constant torque [1, 0.5]; parameters NAME=VALUE by name. */
+#include MODEL_ALL
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+int main(int argc, char **argv) {
+    fmi2CallbackFunctions cb = {0};
+    fmi2Component c = fmi2Instantiate("bench", fmi2CoSimulation, INSTANTIATION_TOKEN, "", &cb, fmi2False, fmi2False);
+    fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0);
+    for (int a = 2; a < argc; a++) {
+        char *eq = strchr(argv[a], '=');
+        unsigned int vr = N_VR;
+        *eq = 0;
+        for (unsigned int k = 0; k < N_VR; k++) if (!strcmp(VR_NAME[k], argv[a])) vr = k;
+        if (vr == N_VR) { fprintf(stderr, "no variable %s\n", argv[a]); return 2; }
+        double v = atof(eq + 1);
+        fmi2SetReal(c, &vr, 1, &v);
+    }
+    fmi2EnterInitializationMode(c);
+    if (fmi2ExitInitializationMode(c) != fmi2OK) return 3;
+    unsigned int vin[2] = {0, 0};
+    for (unsigned int k = 0; k < N_VR; k++) {
+        if (!strcmp(VR_NAME[k], "tau_m[1]")) vin[0] = k;
+        if (!strcmp(VR_NAME[k], "tau_m[2]")) vin[1] = k;
+    }
+    double u[2] = {1.0, 0.5};
+    fmi2SetReal(c, vin, 2, u);
+    return fmi2DoStep(c, 0.0, atof(argv[1]), fmi2True) == fmi2OK ? 0 : 4;
+}
+"""
+
+
 def callgrind(path: Path, params: dict, seconds: float) -> int:
-    """Instructions executed inside fmi2DoStep for one doStep of ``seconds`` (valgrind)."""
+    """Instructions executed inside fmi2DoStep for one doStep of ``seconds`` (valgrind on a
+    C driver compiled with the FMU's own sources and the build's flags)."""
+    import zipfile
+
+    from fmus.build import CFLAGS
+
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "callgrind.out"
-        cmd = ["valgrind", "--tool=callgrind", "--toggle-collect=fmi2DoStep", f"--callgrind-out-file={out}",
-               sys.executable, __file__, "--one-call", str(path), json.dumps(params), str(seconds)]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
+        tmp = Path(tmp)
+        with zipfile.ZipFile(path) as z:
+            z.extractall(tmp)
+        src = tmp / "sources"
+        (src / "driver.c").write_text(_DRIVER)
+        ident = read_identifier(tmp / "modelDescription.xml")
+        exe = tmp / "driver"
+        flags = [f for f in CFLAGS if f not in ("-shared", "-fvisibility=hidden", "-Wall", "-Wextra")]
+        cmd = [os.environ.get("CC", "cc"), *flags, "-g", "-I", str(src), f'-DMODEL_ALL="{ident}_all.c"',
+               "-o", str(exe), str(src / "driver.c"), "-lm"]
+        subprocess.run(cmd, check=True, capture_output=True)
+        out = tmp / "callgrind.out"
+        args = [f"{k}={v!r}" for k, v in params.items()]
+        proc = subprocess.run(["valgrind", "--tool=callgrind", "--toggle-collect=fmi2DoStep",
+                               f"--callgrind-out-file={out}", str(exe), str(seconds), *args],
+                              capture_output=True, text=True)
         if proc.returncode != 0:
-            raise RuntimeError(f"valgrind failed: {proc.stderr[-2000:]}")
-        text = out.read_text()
-        m = re.search(r"^(?:summary|totals):\s*(\d+)", text, re.M)
-        if not m:
-            raise RuntimeError("no instruction total in the callgrind output")
+            raise RuntimeError(f"the callgrind run failed: {proc.stderr[-2000:]}")
+        m = re.search(r"^summary:\s*(\d+)", out.read_text(), re.M)
+        if not m or int(m.group(1)) == 0:
+            raise RuntimeError("no instructions counted inside fmi2DoStep")
         return int(m.group(1))
+
+
+def read_identifier(description: Path) -> str:
+    m = re.search(r'modelIdentifier="([^"]+)"', description.read_text())
+    return m.group(1)
 
 
 def main(argv=None) -> int:
@@ -101,12 +156,7 @@ def main(argv=None) -> int:
     ap.add_argument("--callgrind", action="store_true", help="count instructions with valgrind")
     ap.add_argument("--callgrind-seconds", type=float, default=1.0)
     ap.add_argument("--json", default=None, help="write the results here (atomically)")
-    ap.add_argument("--one-call", nargs=3, metavar=("FMU", "PARAMS", "SECONDS"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args.one_call:  # the process valgrind runs
-        with Plant(args.one_call[0]) as plant:
-            one_call(plant, json.loads(args.one_call[1]), float(args.one_call[2]))
-        return 0
     c_path = fmus.default_fmu_path()
     m_path = modelica_build.default_fmu_path()
     u = torque()

@@ -210,7 +210,7 @@ def header_text(exported: dict, t: dict, ident: str) -> str:
              f'#define MODEL_IDENTIFIER_STRING "{ident}"', f'#define INSTANTIATION_TOKEN "{t["guid"]}"',
              f"#define N_VR {len(v)}", f"#define NX {len(exported['states'])}",
              f"#define NP {exported['n_parameters']}", f"#define NU {len(exported['inputs'])}",
-             f"#define NOBS {exported['n_observed']}", "",
+             f"#define NOBS {exported['n_observed']}", f"#define NROT {_equations(exported)[3]}", "",
              "enum { CAUS_PARAMETER = 0, CAUS_INPUT = 1, CAUS_OUTPUT = 2 };",
              "enum { vr_rk4_step = 0 };", "",
              "static const char *const VR_NAME[N_VR] = {", *(f"    {_cstr(x['name'])}," for x in v), "};",
@@ -266,10 +266,72 @@ def _rigid_rhs(exported: dict) -> tuple[str, list[tuple[int, float]]]:
     return body, [(slots[k], v) for k, v in switches.items()]
 
 
+def _calls(text: str, fn: str):
+    """(start, end, argument) of every call ``fn(...)`` in ``text`` (balanced parentheses)."""
+    import re
+
+    for m in re.finditer(rf"(?<![A-Za-z0-9_]){fn}\(", text):
+        depth, i = 1, m.end()
+        while depth:
+            depth += {"(": 1, ")": -1}.get(text[i], 0)
+            i += 1
+        yield m.start(), i, text[m.end():i - 1]
+
+
+def _rotated(body: str, slots: dict) -> str:
+    """``body`` with sin(a) and cos(a) replaced by md_sin/md_cos of a per-argument slot."""
+    out, pos = [], 0
+    calls = sorted([(a, b, arg, fn) for fn in ("sin", "cos") for a, b, arg in _calls(body, fn)])
+    for a, b, arg, fn in calls:
+        k = slots.setdefault(arg, len(slots))
+        out += [body[pos:a], f"md_{fn}(w + MD_ROT_OFFSET + {4 * k}, {arg})"]
+        pos = b
+    return "".join(out) + body[pos:]
+
+
+def _equations(exported: dict) -> tuple[str, str, list, int]:
+    """(the generated C with rhs's sin/cos rotated, rhs_rigid or "", its selector, NROT)."""
+    c = exported["c"]
+    start = c.index("void rhs(")
+    end = c.index("\n}\n", start) + 3
+    slots: dict = {}
+    c = c[:start] + _rotated(c[start:end], slots) + c[end:]
+    rigid, select = _rigid_rhs({**exported, "c": c})
+    return c, rigid, select, len(slots)
+
+
+_ROTATION = """/* sin and cos of an angle from an exact libm pair at a nearby reference angle (one per
+   distinct argument, in the workspace): sin(r + d) = s_r cos d + c_r sin d with the Taylor
+   series of cos d, sin d to d^6, exact to rounding for |d| <= 1e-4 rad (truncation below
+   1e-28); a new exact reference when |d| > 1e-4.  What the C FMU does with its step-start
+   rotation; it replaces four sin/cos evaluations per RK4 step by polynomials. */
+static inline void md_rotate(double *slot, double a) {
+    double d = a - slot[0];
+    if (slot[3] == 0.0 || fabs(d) > 1e-4) {
+        slot[0] = a; slot[1] = sin(a); slot[2] = cos(a); slot[3] = 1.0;
+    }
+}
+static inline double md_sin(double *slot, double a) {
+    md_rotate(slot, a);
+    const double d = a - slot[0], d2 = d * d;
+    const double sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
+    const double cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
+    return slot[1] * cd + slot[2] * sd;
+}
+static inline double md_cos(double *slot, double a) {
+    md_rotate(slot, a);
+    const double d = a - slot[0], d2 = d * d;
+    const double sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
+    const double cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
+    return slot[2] * cd - slot[1] * sd;
+}
+"""
+
+
 def generated_c(exported: dict) -> str:
     body = [f"    p[{k}] = {exported['parameters'][k]['c']};  /* {exported['parameters'][k]['name']} */"
             for k in exported["dependent_order"]]
-    rigid, select = _rigid_rhs(exported)
+    c, rigid, select, nrot = _equations(exported)
     if rigid:
         test = " && ".join(f"p[{k}] == {v!r}" for k, v in select)
         fast = ["/* The rigid configuration's rhs: the generated rhs with its switches constant. */",
@@ -283,7 +345,8 @@ def generated_c(exported: dict) -> str:
         "#pragma GCC diagnostic ignored \"-Wunused-variable\"",
         "#pragma GCC diagnostic ignored \"-Wunused-but-set-variable\"",
         "#pragma GCC diagnostic ignored \"-Wunused-function\"", "#endif",
-        exported["c"], *fast,
+        "#include <math.h>", f"#define MD_ROT_OFFSET (NOBS + 1)", _ROTATION,
+        c, *fast,
         "/* The dependent (calculated) parameters, from the model's bindings, in evaluation order. */",
         "static void md_dependent(double *p) {", *body, "}", ""])
 

@@ -16,7 +16,7 @@
 
 typedef struct {
     double p[NP + NU];      /* parameters in the generated code's order, then the inputs */
-    double w[NOBS + 1];     /* the generated code's workspace */
+    double w[NOBS + 1 + 4 * NROT]; /* the generated code's workspace, then the sin/cos references */
     int rigid;              /* the rigid configuration: use rhs_rigid */
 } ModelData;
 

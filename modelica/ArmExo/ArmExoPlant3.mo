@@ -37,6 +37,10 @@ model ArmExoPlant3 "3-DOF exoskeleton (shoulder, elbow, wrist) + linear human ar
     "det M_h (the compliant cuff needs M_h invertible)";
   final parameter Real M_h_inv[3, 3] = M_h_adj/M_h_det "Inverse of M_h (used with a compliant cuff only)";
   ArmExo.Units.Torque tau_cuff[3] "Torque robot -> arm at the cuff (before the sensor lag)";
+  ArmExo.Units.Inertia A_link[3, 3] "Mass matrix of the link equation (M_r, plus M_h with a rigid cuff)";
+  Real adj_A_link[3, 3] "Adjugate of A_link";
+  Real det_A_link "det A_link";
+  ArmExo.Units.Torque f_link[3] "Right-hand side of the link equation";
 equation
   // actuator
   actuator_lag.u = tau_m;
@@ -63,8 +67,31 @@ equation
   robot.theta = theta_link;
   robot.w = w_link;
   der(theta_link) = w_link;
-  robot.M*der(w_link) + cuff_rigid*(arm.M_h*der(w_link) + arm.B_h*w_link + arm.K_h*theta_link)
-    + robot.c + robot.G = tau_link - (1 - cuff_rigid)*interface_compliance.tau;
+  //   A der(w_link) = f,  A = M_r(q) + cuff_rigid M_h,
+  //   f = tau_link - c_r - G - cuff_rigid (B_h w_link + K_h theta_link) - (1 - cuff_rigid) tau_cuff,
+  // solved by the adjugate here (one division) rather than by the exporter's tearing
+  for i in 1:3 loop
+    f_link[i] = tau_link[i] - robot.c[i] - robot.G[i]
+      - cuff_rigid*(arm.B_h[i, 1]*w_link[1] + arm.B_h[i, 2]*w_link[2] + arm.B_h[i, 3]*w_link[3]
+                    + arm.K_h[i, 1]*theta_link[1] + arm.K_h[i, 2]*theta_link[2] + arm.K_h[i, 3]*theta_link[3])
+      - (1 - cuff_rigid)*interface_compliance.tau[i];
+    for k in 1:3 loop
+      A_link[i, k] = robot.M[i, k] + cuff_rigid*arm.M_h[i, k];
+    end for;
+  end for;
+  adj_A_link[1, 1] = A_link[2, 2]*A_link[3, 3] - A_link[2, 3]*A_link[3, 2];
+  adj_A_link[1, 2] = A_link[1, 3]*A_link[3, 2] - A_link[1, 2]*A_link[3, 3];
+  adj_A_link[1, 3] = A_link[1, 2]*A_link[2, 3] - A_link[1, 3]*A_link[2, 2];
+  adj_A_link[2, 1] = A_link[2, 3]*A_link[3, 1] - A_link[2, 1]*A_link[3, 3];
+  adj_A_link[2, 2] = A_link[1, 1]*A_link[3, 3] - A_link[1, 3]*A_link[3, 1];
+  adj_A_link[2, 3] = A_link[1, 3]*A_link[2, 1] - A_link[1, 1]*A_link[2, 3];
+  adj_A_link[3, 1] = A_link[2, 1]*A_link[3, 2] - A_link[2, 2]*A_link[3, 1];
+  adj_A_link[3, 2] = A_link[1, 2]*A_link[3, 1] - A_link[1, 1]*A_link[3, 2];
+  adj_A_link[3, 3] = A_link[1, 1]*A_link[2, 2] - A_link[1, 2]*A_link[2, 1];
+  det_A_link = A_link[1, 1]*adj_A_link[1, 1] + A_link[1, 2]*adj_A_link[2, 1] + A_link[1, 3]*adj_A_link[3, 1];
+  for i in 1:3 loop
+    der(w_link[i]) = (adj_A_link[i, 1]*f_link[1] + adj_A_link[i, 2]*f_link[2] + adj_A_link[i, 3]*f_link[3])/det_A_link;
+  end for;
   // cuff and arm; interface_compliance.on is a run-time parameter: every state exists, the
   // arm's own states keep zero derivatives with a rigid cuff
   interface_compliance.phi_a = theta_link;
