@@ -1,6 +1,11 @@
 """Build the plant FMUs from the C sources with the system compiler.
 
-Usage: ``python -m fmus.build [--out-dir DIR] [--cc CC] [--fmi-version {2,3,all}]``.
+Usage: ``python -m fmus.build [--out-dir DIR] [--cc CC] [--fmi-version {2,3,all}] [--no-modelica]``.
+
+It also exports the plant from its Modelica source (``fmus.modelica_build``:
+``ArmExoPlant_modelica.fmu``, ``ArmExoPlant_modelica_fmi3.fmu``, ``ArmExoPlant3_modelica.fmu``)
+when a Python >= 3.12 with ``modelica==0.0.205`` exists; otherwise it says so in one line
+and the C plant below is the only one (the fallback and the reference).
 
 ``fmus/build/ArmExoPlant.fmu`` is FMI 2.0 Co-Simulation, ``fmus/build/ArmExoPlant_fmi3.fmu``
 FMI 3.0 Co-Simulation, both from the same sources (``-DFMI_VERSION=3`` selects the FMI 3.0
@@ -192,6 +197,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cc", default=None, help="C compiler (default $CC or cc)")
     parser.add_argument("--fmi-version", choices=("2", "3", "all"), default="all",
                         help="FMI 2.0, FMI 3.0 or both (default both)")
+    parser.add_argument("--no-modelica", action="store_true",
+                        help="do not export the plant from its Modelica source (C plant only)")
     args = parser.parse_args(argv)
     versions = (2, 3) if args.fmi_version == "all" else (int(args.fmi_version),)
     try:
@@ -204,6 +211,17 @@ def main(argv: list[str] | None = None) -> int:
     except BuildError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+    if not args.no_modelica:
+        from . import modelica_build
+
+        try:
+            for path in modelica_build.build_all(args.out_dir, cc=args.cc):
+                print(path)
+        except modelica_build.ExporterUnavailable as exc:
+            print(f"note: Modelica export skipped, the C plant is used: {exc}")
+        except BuildError as exc:
+            print(f"error: Modelica export: {exc}", file=sys.stderr)
+            return 1
     return 0
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import gc
+import os
 import threading
 from pathlib import Path
 
@@ -24,15 +25,52 @@ from .setup import reference_arm_of
 _local = threading.local()
 
 
-def default_fmu_path(n_dof: int = 2) -> Path:
-    """The reference C plant of n_dof links (package ``fmus``: ``ArmExoPlant.fmu`` for 2,
-    ``ArmExoPlant3.fmu`` for 3), built on first use.
+#: The built-in plants: the hand-written C FMU (the reference, and the fallback) and the
+#: FMU exported from the Modelica source (fmus.modelica_build). Chosen by ``plant=``, else
+#: by the environment variable ARMEXO_PLANT (``armimp --plant``), else "c".
+PLANT_KINDS = ("c", "modelica")
+PLANT_ENV = "ARMEXO_PLANT"
+
+
+def plant_kind(choice: str | None = None) -> str:
+    """The built-in plant to use: ``choice``, else ``$ARMEXO_PLANT``, else ``"c"``.
 
     Raises
     ------
     SetupError
-        ``fmus`` is not importable, or it has no plant of n_dof links.
+        Another value (named, with where it came from).
     """
+    where = "plant"
+    if choice is None:
+        choice, where = os.environ.get(PLANT_ENV) or "c", PLANT_ENV
+    if choice not in PLANT_KINDS:
+        raise SetupError(f"{where} = {choice!r}: the built-in plants are {', '.join(PLANT_KINDS)}")
+    return choice
+
+
+def describe_plant(generation_tool: str) -> str:
+    """Which plant an FMU is, from its generationTool: the C plant, the Modelica export, or
+    another FMU."""
+    if generation_tool.startswith("modelica "):
+        return "exported from modelica/ArmExo (" + generation_tool + ")"
+    if generation_tool == "fmus/generate.py":
+        return "hand-written C plant (fmus/ArmExoPlant)"
+    return f"external FMU ({generation_tool or 'generation tool not stated'})"
+
+
+def default_fmu_path(n_dof: int = 2, plant: str | None = None) -> Path:
+    """The built-in plant of n_dof links, built on first use: the C plant (package
+    ``fmus``: ``ArmExoPlant.fmu`` for 2, ``ArmExoPlant3.fmu`` for 3) or, with
+    ``plant="modelica"`` (or ``ARMEXO_PLANT=modelica``), the plant exported from the Modelica
+    source (``ArmExoPlant_modelica.fmu``, ``ArmExoPlant3_modelica.fmu``).
+
+    Raises
+    ------
+    SetupError
+        ``fmus`` is not importable, it has no plant of n_dof links, an unknown plant kind,
+        or the Modelica plant is asked for and cannot be exported (the reason in one line).
+    """
+    kind = plant_kind(plant)
     try:
         import fmus
         from fmus.variables import N_LINKS
@@ -42,6 +80,13 @@ def default_fmu_path(n_dof: int = 2) -> Path:
     if n_dof not in N_LINKS:
         raise SetupError(f"no built-in plant of {n_dof} joints (the C plant has n in "
                          f"{list(N_LINKS)}); pass plant=<path to an FMU of {n_dof} joints>")
+    if kind == "modelica":
+        from fmus import modelica_build
+
+        try:
+            return Path(modelica_build.default_fmu_path(n=n_dof))
+        except modelica_build.BuildError as exc:
+            raise SetupError(f"the Modelica plant of {n_dof} joints is not available: {exc}") from exc
     return Path(fmus.default_fmu_path(build_if_missing=True, n=n_dof))
 
 
@@ -149,7 +194,8 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
     meta["simulation"] = {
         "simulator": "orchestrator",
         "fmu": {"file": plant.path.name, "model_name": plant.model_name, "guid": plant.guid,
-                "generation_tool": plant.generation_tool},
+                "generation_tool": plant.generation_tool,
+                "plant": describe_plant(plant.generation_tool)},
         "arm": setup.arm_metadata(),
         "effects": copy.deepcopy(hidden.normalized),
         "rk4_step": required.get("rk4_step", plant.parameters.get("rk4_step")),

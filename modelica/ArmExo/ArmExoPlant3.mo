@@ -28,7 +28,19 @@ model ArmExoPlant3 "3-DOF exoskeleton (shoulder, elbow, wrist) + linear human ar
   ArmExo.Units.AngularVelocity w_arm[3](each start = 0, each fixed = true) "Arm velocities (interface compliance only)";
   ArmExo.Units.Torque tau_act[3] "Torque applied by the actuators";
   ArmExo.Units.Torque tau_link[3] "Joint torque acting on the links";
+  final parameter Real cuff_rigid = if interface_compliance.on then 0 else 1
+    "1: rigid cuff (the arm's impedance acts on the links), 0: compliant cuff";
+  final parameter Real M_h_adj[3, 3] = [arm.M_h[2, 2]*arm.M_h[3, 3] - arm.M_h[2, 3]*arm.M_h[3, 2], arm.M_h[1, 3]*arm.M_h[3, 2] - arm.M_h[1, 2]*arm.M_h[3, 3], arm.M_h[1, 2]*arm.M_h[2, 3] - arm.M_h[1, 3]*arm.M_h[2, 2];
+      arm.M_h[2, 3]*arm.M_h[3, 1] - arm.M_h[2, 1]*arm.M_h[3, 3], arm.M_h[1, 1]*arm.M_h[3, 3] - arm.M_h[1, 3]*arm.M_h[3, 1], arm.M_h[1, 3]*arm.M_h[2, 1] - arm.M_h[1, 1]*arm.M_h[2, 3];
+      arm.M_h[2, 1]*arm.M_h[3, 2] - arm.M_h[2, 2]*arm.M_h[3, 1], arm.M_h[1, 2]*arm.M_h[3, 1] - arm.M_h[1, 1]*arm.M_h[3, 2], arm.M_h[1, 1]*arm.M_h[2, 2] - arm.M_h[1, 2]*arm.M_h[2, 1]] "Adjugate of M_h";
+  final parameter Real M_h_det = arm.M_h[1, 1]*M_h_adj[1, 1] + arm.M_h[1, 2]*M_h_adj[2, 1] + arm.M_h[1, 3]*M_h_adj[3, 1]
+    "det M_h (the compliant cuff needs M_h invertible)";
+  final parameter Real M_h_inv[3, 3] = M_h_adj/M_h_det "Inverse of M_h (used with a compliant cuff only)";
   ArmExo.Units.Torque tau_cuff[3] "Torque robot -> arm at the cuff (before the sensor lag)";
+  ArmExo.Units.Inertia A_link[3, 3] "Mass matrix of the link equation (M_r, plus M_h with a rigid cuff)";
+  Real adj_A_link[3, 3] "Adjugate of A_link";
+  Real det_A_link "det A_link";
+  ArmExo.Units.Torque f_link[3] "Right-hand side of the link equation";
 equation
   // actuator
   actuator_lag.u = tau_m;
@@ -38,46 +50,69 @@ equation
   transmission_compliance.w_a = w_mot;
   transmission_compliance.phi_b = theta_link;
   transmission_compliance.w_b = w_link;
-  if transmission_compliance.on then
-    der(theta_mot) = w_mot;
-    robot.Jm .* der(w_mot) = tau_act - friction.tau_f - transmission_compliance.tau;
-    friction.w = w_mot;
-    tau_link = transmission_compliance.tau;
-    theta = theta_mot;
-    omega = w_mot;
-  else
-    der(theta_mot) = zeros(3);
-    der(w_mot) = zeros(3);
-    friction.w = w_link;
-    tau_link = tau_act - friction.tau_f;
-    theta = theta_link;
-    omega = w_link;
-  end if;
-  // links
+  // rigid (friction on the link) or compliant (friction and encoder on the motor); the
+  // switch is a run-time parameter: every state exists, unused ones keep zero derivatives
+  for j in 1:3 loop
+    der(theta_mot[j]) = if transmission_compliance.on then w_mot[j] else 0;
+    der(w_mot[j]) = if transmission_compliance.on then
+      (tau_act[j] - friction.tau_f[j] - transmission_compliance.tau[j])/robot.Jm[j] else 0;
+    friction.w[j] = if transmission_compliance.on then w_mot[j] else w_link[j];
+    tau_link[j] = if transmission_compliance.on then transmission_compliance.tau[j]
+      else tau_act[j] - friction.tau_f[j];
+    theta[j] = if transmission_compliance.on then theta_mot[j] else theta_link[j];
+    omega[j] = if transmission_compliance.on then w_mot[j] else w_link[j];
+  end for;
+  // links: with a rigid cuff the arm moves with them and its impedance adds to their
+  // equation (cuff_rigid = 1); with a compliant cuff the cuff torque acts instead
   robot.theta = theta_link;
   robot.w = w_link;
   der(theta_link) = w_link;
-  robot.M*der(w_link) + robot.c + robot.G = tau_link - tau_cuff;
-  // cuff: rigid (the arm moves with the link) or compliant (the arm has its own states)
+  //   A der(w_link) = f,  A = M_r(q) + cuff_rigid M_h,
+  //   f = tau_link - c_r - G - cuff_rigid (B_h w_link + K_h theta_link) - (1 - cuff_rigid) tau_cuff,
+  // solved by the adjugate here (one division) rather than by the exporter's tearing
+  for i in 1:3 loop
+    f_link[i] = tau_link[i] - robot.c[i] - robot.G[i]
+      - cuff_rigid*(arm.B_h[i, 1]*w_link[1] + arm.B_h[i, 2]*w_link[2] + arm.B_h[i, 3]*w_link[3]
+                    + arm.K_h[i, 1]*theta_link[1] + arm.K_h[i, 2]*theta_link[2] + arm.K_h[i, 3]*theta_link[3])
+      - (1 - cuff_rigid)*interface_compliance.tau[i];
+    for k in 1:3 loop
+      A_link[i, k] = robot.M[i, k] + cuff_rigid*arm.M_h[i, k];
+    end for;
+  end for;
+  adj_A_link[1, 1] = A_link[2, 2]*A_link[3, 3] - A_link[2, 3]*A_link[3, 2];
+  adj_A_link[1, 2] = A_link[1, 3]*A_link[3, 2] - A_link[1, 2]*A_link[3, 3];
+  adj_A_link[1, 3] = A_link[1, 2]*A_link[2, 3] - A_link[1, 3]*A_link[2, 2];
+  adj_A_link[2, 1] = A_link[2, 3]*A_link[3, 1] - A_link[2, 1]*A_link[3, 3];
+  adj_A_link[2, 2] = A_link[1, 1]*A_link[3, 3] - A_link[1, 3]*A_link[3, 1];
+  adj_A_link[2, 3] = A_link[1, 3]*A_link[2, 1] - A_link[1, 1]*A_link[2, 3];
+  adj_A_link[3, 1] = A_link[2, 1]*A_link[3, 2] - A_link[2, 2]*A_link[3, 1];
+  adj_A_link[3, 2] = A_link[1, 2]*A_link[3, 1] - A_link[1, 1]*A_link[3, 2];
+  adj_A_link[3, 3] = A_link[1, 1]*A_link[2, 2] - A_link[1, 2]*A_link[2, 1];
+  det_A_link = A_link[1, 1]*adj_A_link[1, 1] + A_link[1, 2]*adj_A_link[2, 1] + A_link[1, 3]*adj_A_link[3, 1];
+  for i in 1:3 loop
+    der(w_link[i]) = (adj_A_link[i, 1]*f_link[1] + adj_A_link[i, 2]*f_link[2] + adj_A_link[i, 3]*f_link[3])/det_A_link;
+  end for;
+  // cuff and arm; interface_compliance.on is a run-time parameter: every state exists, the
+  // arm's own states keep zero derivatives with a rigid cuff
   interface_compliance.phi_a = theta_link;
   interface_compliance.w_a = w_link;
   interface_compliance.phi_b = theta_arm;
   interface_compliance.w_b = w_arm;
-  if interface_compliance.on then
-    der(theta_arm) = w_arm;
-    arm.theta = theta_arm;
-    arm.w = w_arm;
-    arm.a = der(w_arm);
-    arm.tau = interface_compliance.tau;
-    tau_cuff = interface_compliance.tau;
-  else
-    der(theta_arm) = zeros(3);
-    der(w_arm) = zeros(3);
-    arm.theta = theta_link;
-    arm.w = w_link;
-    arm.a = der(w_link);
-    tau_cuff = arm.tau;
-  end if;
+  for j in 1:3 loop
+    der(theta_arm[j]) = if interface_compliance.on then w_arm[j] else 0;
+    der(w_arm[j]) = if interface_compliance.on then
+      M_h_inv[j, 1]*(interface_compliance.tau[1] - arm.B_h[1, 1]*w_arm[1] - arm.B_h[1, 2]*w_arm[2] - arm.B_h[1, 3]*w_arm[3]
+        - arm.K_h[1, 1]*theta_arm[1] - arm.K_h[1, 2]*theta_arm[2] - arm.K_h[1, 3]*theta_arm[3])
+      + M_h_inv[j, 2]*(interface_compliance.tau[2] - arm.B_h[2, 1]*w_arm[1] - arm.B_h[2, 2]*w_arm[2] - arm.B_h[2, 3]*w_arm[3]
+        - arm.K_h[2, 1]*theta_arm[1] - arm.K_h[2, 2]*theta_arm[2] - arm.K_h[2, 3]*theta_arm[3])
+      + M_h_inv[j, 3]*(interface_compliance.tau[3] - arm.B_h[3, 1]*w_arm[1] - arm.B_h[3, 2]*w_arm[2] - arm.B_h[3, 3]*w_arm[3]
+        - arm.K_h[3, 1]*theta_arm[1] - arm.K_h[3, 2]*theta_arm[2] - arm.K_h[3, 3]*theta_arm[3])
+      else 0;
+    arm.theta[j] = if interface_compliance.on then theta_arm[j] else theta_link[j];
+    arm.w[j] = if interface_compliance.on then w_arm[j] else w_link[j];
+    arm.a[j] = if interface_compliance.on then der(w_arm[j]) else der(w_link[j]);
+    tau_cuff[j] = if interface_compliance.on then interface_compliance.tau[j] else arm.tau[j];
+  end for;
   // torque sensor
   torque_sensor_lag.u = tau_cuff;
   tau_h = torque_sensor_lag.y;

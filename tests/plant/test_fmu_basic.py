@@ -89,7 +89,8 @@ def test_default_fmu_path_rebuilds_when_stale(monkeypatch, tmp_path):
 def test_build_cli(tmp_path):
     import sys
 
-    out = subprocess.run([sys.executable, "-m", "fmus.build", "--out-dir", str(tmp_path)], capture_output=True,
+    out = subprocess.run([sys.executable, "-m", "fmus.build", "--out-dir", str(tmp_path), "--no-modelica"],
+                         capture_output=True,
                          text=True, cwd=Path(__file__).resolve().parents[2])
     assert out.returncode == 0, out.stderr
     assert (tmp_path / f"{MODEL_NAME}.fmu").exists()

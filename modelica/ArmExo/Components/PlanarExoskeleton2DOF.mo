@@ -18,6 +18,8 @@ model PlanarExoskeleton2DOF "Serial 2-link planar exoskeleton: mass matrix, Cori
   final parameter ArmExo.Units.Inertia a1 = scale*(I1 + m1*lc1^2 + I2 + m2*(L1^2 + lc2^2));
   final parameter ArmExo.Units.Inertia a2 = scale*(I2 + m2*lc2^2);
   final parameter ArmExo.Units.Inertia a3 = scale*m2*L1*lc2;
+  final parameter Boolean tilted = beta <> 0 "Gravity acts (a run-time switch: no cosines of q1 when level)";
+  final parameter ArmExo.Units.Acceleration g_tilt = g_n*sin(beta) "In-plane gravity";
   input ArmExo.Units.Angle theta[2] "Link angles, deviation from the posture";
   input ArmExo.Units.AngularVelocity w[2] "Link velocities";
   output ArmExo.Units.Inertia M[2, 2] "Mass matrix M_r(q) (with Jm where it moves with the link)";
@@ -29,7 +31,8 @@ equation
   M = [a1 + 2*a3*cos(q[2]) + Jm_on_link[1]*Jm[1], a2 + a3*cos(q[2]);
        a2 + a3*cos(q[2]), a2 + Jm_on_link[2]*Jm[2]];
   c = a3*sin(q[2])*{-(2*w[1]*w[2] + w[2]^2), w[1]^2};
-  G = g_n*sin(beta)*{(m1*lc1 + m2*L1)*cos(q[1]) + m2*lc2*cos(q[1] + q[2]), m2*lc2*cos(q[1] + q[2])};
+  G[2] = if tilted then g_tilt*m2*lc2*cos(q[1] + q[2]) else 0;
+  G[1] = if tilted then g_tilt*(m1*lc1 + m2*L1)*cos(q[1]) + G[2] else 0;
   annotation (Documentation(info = "<html>
 <p>Link-side dynamics of the 2-link planar exoskeleton (docs/spec/reference.md section 3):</p>
 <pre>

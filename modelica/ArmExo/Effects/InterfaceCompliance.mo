@@ -3,7 +3,7 @@ model InterfaceCompliance "Spring-damper (the cuff) between robot link (side a) 
   extends ArmExo.Interfaces.PartialCompliance;
   parameter ArmExo.Units.RotationalSpringConstant k_s[n](each min = 0) = fill(0, n) "Stiffness (0: rigid cuff, off)";
   parameter ArmExo.Units.RotationalDampingConstant c_s[n](each min = 0) = fill(0, n) "Damping";
-  final parameter Boolean on = min(k_s) > 0 "Compliant cuff in every joint" annotation (Evaluate = true);
+  final parameter Boolean on = min(k_s) > 0 "Compliant cuff in every joint (a run-time switch, not structural)";
 equation
   tau = k_s .* (phi_a - phi_b) + c_s .* (w_a - w_b);
   annotation (Documentation(info = "<html>

@@ -3,7 +3,7 @@ model TransmissionCompliance "Spring-damper between motor (side a) and link (sid
   extends ArmExo.Interfaces.PartialCompliance;
   parameter ArmExo.Units.RotationalSpringConstant k_t[n](each min = 0) = fill(0, n) "Stiffness (0: rigid, off)";
   parameter ArmExo.Units.RotationalDampingConstant c_t[n](each min = 0) = fill(0, n) "Damping";
-  final parameter Boolean on = min(k_t) > 0 "Compliant transmission in every joint" annotation (Evaluate = true);
+  final parameter Boolean on = min(k_t) > 0 "Compliant transmission in every joint (a run-time switch, not structural)";
 equation
   tau = k_t .* (phi_a - phi_b) + c_t .* (w_a - w_b);
   annotation (Documentation(info = "<html>

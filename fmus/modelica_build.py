@@ -1,0 +1,561 @@
+"""The plant exported from its Modelica source (modelica/ArmExo) as FMI 2.0 / 3.0 CS FMUs.
+
+The exporter is the pure-Python Modelica front end ``modelica==0.0.205``
+(requirements-export.txt), which needs Python >= 3.12: it runs as a subprocess of that
+interpreter (``fmus/modelica_export/export.py``: parse, flatten, the flattener correction,
+causalise, emit C) and writes one JSON file with the generated C and the variable table.
+This module writes the C tables and ``modelDescription.xml`` from it and compiles the C
+with the project's FMI framework (``fmus/framework``; glue in ``fmus/ArmExoModelica``), the
+same fixed-step RK4 grid and the same time/state-machine behaviour as the C FMU.
+
+Files: ``fmus/build/ArmExoPlant_modelica.fmu`` (FMI 2.0), ``ArmExoPlant_modelica_fmi3.fmu``
+(FMI 3.0), ``ArmExoPlant3_modelica.fmu`` (three joints, FMI 2.0).  The exported C is cached
+in ``fmus/build/modelica/`` under a SHA-256 of the Modelica sources and the exporter files.
+
+Variables: ``rk4_step`` (the shell's), every independent parameter of the model under its
+flat name (``arm.M_h[1,1]``, ``friction.Fs[2]``, ...; Integer sizes excluded), the model's
+inputs ``tau_m[j]``, its outputs ``theta[j]``, ``tau_h[j]``, ``omega[j]`` and, as outputs
+for diagnosis, ``tau_act[j]``, ``friction.tau_f[j]``, ``friction.z[j]``, ``theta_link[j]``
+and ``arm.theta[j]``; units, descriptions, start values and min from the model.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import uuid
+import zipfile
+from pathlib import Path
+from xml.sax.saxutils import escape
+
+from .build import BUILD_DIR, CFLAGS, FMI_HEADERS, FRAMEWORK_DIR, BuildError, _fmi_header_dir, _platform
+from .variables import UNITS
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+REPO = PACKAGE_DIR.parent
+MODELICA_DIR = REPO / "modelica" / "ArmExo"
+EXPORT_DIR = PACKAGE_DIR / "modelica_export"
+GLUE_DIR = PACKAGE_DIR / "ArmExoModelica"
+CACHE_DIR = BUILD_DIR / "modelica"
+EXPORTER_VERSION = "0.0.205"
+MODELS = {2: "ArmExo.ArmExoPlant", 3: "ArmExo.ArmExoPlant3"}
+#: model variables exposed as outputs beside the contract's (the C FMU's diagnosis outputs)
+EXTRA_OUTPUTS = ("tau_act", "friction.tau_f", "friction.z", "theta_link", "arm.theta")
+
+
+#: The rigid configuration (no actuator or sensor lag, rigid transmission and cuff, level
+#: plane): the values its switch parameters take.  The build also compiles the generated
+#: rhs with these switches as constants ("rhs_rigid"; the C compiler drops the equations
+#: they switch off) and the FMU uses it when the parameters give that configuration:
+#: nominal and every friction level.
+RIGID = {"actuator_lag.on": 0.0, "transmission_compliance.on": 0.0, "interface_compliance.on": 0.0,
+         "torque_sensor_lag.on": 0.0, "robot.tilted": 0.0, "cuff_rigid": 1.0,
+         **{f"robot.Jm_on_link[{j}]": 1.0 for j in (1, 2, 3)}}
+
+
+class ExporterUnavailable(BuildError):
+    """No Python >= 3.12 with modelica==0.0.205 (the build falls back to the C plant)."""
+
+
+def identifier(n: int = 2) -> str:
+    """Model identifier: ``ArmExoPlant_modelica`` (2 joints), ``ArmExoPlant3_modelica``."""
+    return "ArmExoPlant_modelica" if n == 2 else f"ArmExoPlant{n}_modelica"
+
+
+def fmu_name(fmi_version: int = 2, n: int = 2) -> str:
+    return f"{identifier(n)}{'_fmi3' if fmi_version == 3 else ''}.fmu"
+
+
+def _candidates():
+    env = os.environ.get("ARMEXO_EXPORT_PYTHON")
+    if env:
+        yield env
+        return
+    try:
+        root = subprocess.run(["pyenv", "root"], capture_output=True, text=True, timeout=20).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        root = ""
+    if root:
+        for d in sorted(Path(root, "versions").glob("3.1[2-9]*")):
+            yield str(d / "bin" / "python")
+    for name in ("python3.12", "python3.13", "python3.14"):
+        found = shutil.which(name)
+        if found:
+            yield found
+
+
+_CHECK = ("import sys, importlib.metadata as m; assert sys.version_info >= (3, 12); "
+          "print(m.version('modelica'))")
+
+
+def find_exporter() -> str:
+    """The interpreter that runs the exporter (``$ARMEXO_EXPORT_PYTHON``, else a pyenv
+    3.12+ or python3.12/3.13 on PATH with modelica==0.0.205 installed).
+
+    Raises
+    ------
+    ExporterUnavailable
+        None found (one line saying what is missing).
+    """
+    seen = []
+    for python in _candidates():
+        if not Path(python).exists():
+            continue
+        try:
+            proc = subprocess.run([python, "-c", _CHECK], capture_output=True, text=True, timeout=60)
+        except (OSError, subprocess.SubprocessError):
+            continue
+        version = proc.stdout.strip()
+        if proc.returncode == 0 and version == EXPORTER_VERSION:
+            return python
+        seen.append(f"{python} ({'modelica ' + version if proc.returncode == 0 else 'no modelica'})")
+    raise ExporterUnavailable(
+        f"no Python >= 3.12 with modelica=={EXPORTER_VERSION} (checked: {', '.join(seen) or 'none'}); "
+        "install it with `python3.12 -m pip install -r requirements-export.txt` or set "
+        "ARMEXO_EXPORT_PYTHON")
+
+
+def source_hash() -> str:
+    """SHA-256 over the Modelica package and the exporter files (the cache key)."""
+    h = hashlib.sha256(EXPORTER_VERSION.encode())
+    files = [(f, f.relative_to(MODELICA_DIR)) for f in
+             sorted(MODELICA_DIR.rglob("*.mo")) + sorted(MODELICA_DIR.rglob("package.order"))]
+    files += [(f, Path("modelica_export") / f.name) for f in sorted(EXPORT_DIR.glob("*.py"))]
+    for f, name in files:
+        h.update(str(name).encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def export(n: int = 2, *, python: str | None = None, use_cache: bool = True) -> dict:
+    """The exported model of n joints (the exporter's JSON, see modelica_export/export.py).
+
+    Raises
+    ------
+    ExporterUnavailable
+        No exporter interpreter.
+    BuildError
+        The export failed (its message).
+    """
+    if n not in MODELS:
+        raise ValueError(f"the Modelica plants have n in {sorted(MODELS)}, got {n!r}")
+    if not (MODELICA_DIR / "package.mo").is_file():
+        raise ExporterUnavailable(f"the Modelica source {MODELICA_DIR} is missing (the exporter "
+                                  "needs the repository's modelica/ArmExo)")
+    key = source_hash()[:16]
+    cached = CACHE_DIR / f"{MODELS[n]}-{key}.json"
+    if use_cache and cached.exists():
+        return json.loads(cached.read_text())
+    python = python or find_exporter()
+    CACHE_DIR.mkdir(parents=True, exist_ok=True)
+    tmp = CACHE_DIR / f".{MODELS[n]}.{os.getpid()}.json"
+    proc = subprocess.run([python, str(EXPORT_DIR / "export.py"), str(MODELICA_DIR), MODELS[n], str(tmp)],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        tmp.unlink(missing_ok=True)
+        raise BuildError(f"exporting {MODELS[n]} failed: {proc.stderr.strip()}")
+    os.replace(tmp, cached)
+    return json.loads(cached.read_text())
+
+
+def _fmi_name(name: str) -> str:
+    return name.replace(", ", ",")
+
+
+def table(exported: dict) -> dict:
+    """The FMU's variables (value reference order) from the exported model."""
+    variables = [{"name": "rk4_step", "causality": "parameter", "unit": "s", "start": 1e-5, "min": 0.0,
+                  "description": "Fixed step of the internal classical RK4 solver (the FMU shell's)"}]
+    params = []
+    for p in exported["parameters"]:
+        if p["independent"] and p["type"] == "Real":
+            params.append(p)
+            variables.append({"name": _fmi_name(p["name"]), "causality": "parameter", "unit": p["unit"],
+                              "start": p["start"], "min": p["min"], "description": p["description"],
+                              "slot": p["slot"]})
+    for k, u in enumerate(exported["inputs"]):
+        variables.append({"name": _fmi_name(u["name"]), "causality": "input", "unit": u["unit"],
+                          "start": 0.0, "min": None, "description": u["description"], "input": k})
+    var = exported["variables"]
+    names = [v for v, a in var.items() if a["causality"] == "output"]
+    for base in EXTRA_OUTPUTS:
+        names += [v for v in var if v.startswith(base + "[")]
+    for name in names:
+        if name not in exported["observed"]:
+            raise BuildError(f"output {name} is not observed by the exported code")
+        variables.append({"name": _fmi_name(name), "causality": "output", "unit": var[name]["unit"],
+                          "start": None, "min": None, "description": var[name]["description"],
+                          "slot": exported["observed"][name]})
+    guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, exported["model"] + exported["c"]
+                                + repr([(v["name"], v["start"]) for v in variables]))) + "}"
+    return {"variables": variables, "guid": guid}
+
+
+def _c(x: float) -> str:
+    return repr(float(x))
+
+
+def _cstr(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def header_text(exported: dict, t: dict, ident: str) -> str:
+    v = t["variables"]
+    lines = [f"/* GENERATED by fmus/modelica_build.py from {exported['model']}: do not edit. */",
+             "#ifndef ARMEXO_MODELICA_VARIABLES_H", "#define ARMEXO_MODELICA_VARIABLES_H", "",
+             f'#define MODEL_IDENTIFIER_STRING "{ident}"', f'#define INSTANTIATION_TOKEN "{t["guid"]}"',
+             f"#define N_VR {len(v)}", f"#define NX {len(exported['states'])}",
+             f"#define NP {exported['n_parameters']}", f"#define NU {len(exported['inputs'])}",
+             f"#define NOBS {exported['n_observed']}", f"#define NROT {_equations(exported)[3]}", "",
+             "enum { CAUS_PARAMETER = 0, CAUS_INPUT = 1, CAUS_OUTPUT = 2 };",
+             "enum { vr_rk4_step = 0 };", "",
+             "static const char *const VR_NAME[N_VR] = {", *(f"    {_cstr(x['name'])}," for x in v), "};",
+             "static const unsigned char VR_CAUSALITY[N_VR] = {",
+             *(f"    CAUS_{x['causality'].upper()}," for x in v), "};",
+             "static const double VR_START[N_VR] = {",
+             *(f"    {_c(x['start']) if x['start'] is not None else '0.0'}," for x in v), "};", ""]
+    par = [(i, x) for i, x in enumerate(v) if "slot" in x and x["causality"] == "parameter"]
+    lines += [f"#define N_PARAM_VR {len(par)}",
+              "static const int PARAM_VR[N_PARAM_VR] = {" + ", ".join(str(i) for i, _ in par) + "};",
+              "static const int PARAM_SLOT[N_PARAM_VR] = {" + ", ".join(str(x["slot"]) for _, x in par) + "};",
+              "static const int PARAM_HAS_MIN[N_PARAM_VR] = {"
+              + ", ".join("1" if x["min"] is not None else "0" for _, x in par) + "};",
+              "static const double PARAM_MIN[N_PARAM_VR] = {"
+              + ", ".join(_c(x["min"]) if x["min"] is not None else "0.0" for _, x in par) + "};"]
+    inp = [i for i, x in enumerate(v) if x["causality"] == "input"]
+    lines += ["static const int INPUT_VR[NU] = {" + ", ".join(map(str, inp)) + "};"]
+    out = [(i, x) for i, x in enumerate(v) if x["causality"] == "output"]
+    lines += [f"#define N_OUTPUT_VR {len(out)}",
+              "static const int OUTPUT_VR[N_OUTPUT_VR] = {" + ", ".join(str(i) for i, _ in out) + "};",
+              "static const int OUTPUT_SLOT[N_OUTPUT_VR] = {" + ", ".join(str(x["slot"]) for _, x in out) + "};"]
+    ps = exported["parameters"]
+    lines += ["static const double P_START[NP] = {"
+              + ", ".join(_c(p.get("start") or 0.0) if p["independent"] else "0.0" for p in ps) + "};",
+              "static const char *const P_NAME[NP] = {" + ", ".join(_cstr(p["name"]) for p in ps) + "};",
+              "static const double X_START[NX] = {" + ", ".join(_c(s["start"]) for s in exported["states"]) + "};",
+              "static const char *const X_NAME[NX] = {"
+              + ", ".join(_cstr(s["name"]) for s in exported["states"]) + "};", "", "#endif", ""]
+    return "\n".join(lines)
+
+
+def _rigid_rhs(exported: dict) -> tuple[str, list[tuple[int, float]]]:
+    """The generated rhs with the rigid configuration's switches as constants, and the
+    (slot, value) pairs that select it; ("", []) when the model lacks a switch."""
+    c, symbols = exported["c"], exported.get("symbols", {})
+    slots = {p["name"]: p["slot"] for p in exported["parameters"]}
+    n = len([v for v in exported["variables"] if v.startswith("tau_m[")])
+    switches = {k: v for k, v in RIGID.items() if not k.startswith("robot.Jm_on_link[")
+                or int(k.split("[")[1][:-1]) <= n}
+    if any(k not in slots or k not in symbols for k in switches):
+        return "", []
+    start = c.index("void rhs(")
+    end = c.index("\n}\n", start) + 3
+    body = c[start:end].replace("void rhs(", "static void rhs_rigid(", 1)
+    for name, value in switches.items():
+        line = f"    {symbols[name]} = p[{slots[name]}];"
+        if line not in body:
+            if f"{symbols[name]}" in body:
+                raise BuildError(f"the generated rhs reads the switch {name} otherwise than "
+                                 f"'{line.strip()}': the exporter's output changed")
+            continue
+        body = body.replace(line, f"    {symbols[name]} = {value!r};")
+    return body, [(slots[k], v) for k, v in switches.items()]
+
+
+def _calls(text: str, fn: str):
+    """(start, end, argument) of every call ``fn(...)`` in ``text`` (balanced parentheses)."""
+    import re
+
+    for m in re.finditer(rf"(?<![A-Za-z0-9_]){fn}\(", text):
+        depth, i = 1, m.end()
+        while depth:
+            depth += {"(": 1, ")": -1}.get(text[i], 0)
+            i += 1
+        yield m.start(), i, text[m.end():i - 1]
+
+
+def _rotated(body: str, slots: dict) -> str:
+    """``body`` with sin(a) and cos(a) replaced by md_sin/md_cos of a per-argument slot."""
+    out, pos = [], 0
+    calls = sorted([(a, b, arg, fn) for fn in ("sin", "cos") for a, b, arg in _calls(body, fn)])
+    for a, b, arg, fn in calls:
+        k = slots.setdefault(arg, len(slots))
+        out += [body[pos:a], f"md_{fn}(w + MD_ROT_OFFSET + {4 * k}, {arg})"]
+        pos = b
+    return "".join(out) + body[pos:]
+
+
+def _equations(exported: dict) -> tuple[str, str, list, int]:
+    """(the generated C with rhs's sin/cos rotated, rhs_rigid or "", its selector, NROT)."""
+    c = exported["c"]
+    start = c.index("void rhs(")
+    end = c.index("\n}\n", start) + 3
+    slots: dict = {}
+    c = c[:start] + _rotated(c[start:end], slots) + c[end:]
+    rigid, select = _rigid_rhs({**exported, "c": c})
+    return c, rigid, select, len(slots)
+
+
+_ROTATION = """/* sin and cos of an angle from an exact libm pair at a nearby reference angle (one per
+   distinct argument, in the workspace): sin(r + d) = s_r cos d + c_r sin d with the Taylor
+   series of cos d, sin d to d^6, exact to rounding for |d| <= 1e-4 rad (truncation below
+   1e-28); a new exact reference when |d| > 1e-4.  What the C FMU does with its step-start
+   rotation; it replaces four sin/cos evaluations per RK4 step by polynomials. */
+static inline void md_rotate(double *slot, double a) {
+    double d = a - slot[0];
+    if (slot[3] == 0.0 || fabs(d) > 1e-4) {
+        slot[0] = a; slot[1] = sin(a); slot[2] = cos(a); slot[3] = 1.0;
+    }
+}
+static inline double md_sin(double *slot, double a) {
+    md_rotate(slot, a);
+    const double d = a - slot[0], d2 = d * d;
+    const double sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
+    const double cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
+    return slot[1] * cd + slot[2] * sd;
+}
+static inline double md_cos(double *slot, double a) {
+    md_rotate(slot, a);
+    const double d = a - slot[0], d2 = d * d;
+    const double sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
+    const double cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
+    return slot[2] * cd - slot[1] * sd;
+}
+"""
+
+
+def generated_c(exported: dict) -> str:
+    body = [f"    p[{k}] = {exported['parameters'][k]['c']};  /* {exported['parameters'][k]['name']} */"
+            for k in exported["dependent_order"]]
+    c, rigid, select, nrot = _equations(exported)
+    if rigid:
+        test = " && ".join(f"p[{k}] == {v!r}" for k, v in select)
+        fast = ["/* The rigid configuration's rhs: the generated rhs with its switches constant. */",
+                rigid, "#define HAVE_RHS_RIGID 1",
+                "static int md_is_rigid(const double *p) {", f"    return {test};", "}", ""]
+    else:
+        fast = ["#define HAVE_RHS_RIGID 0", ""]
+    return "\n".join([
+        f"/* The equations of {exported['model']}, generated by {exported['generator']}. */",
+        "#if defined(__GNUC__)", "#pragma GCC diagnostic ignored \"-Wunused-parameter\"",
+        "#pragma GCC diagnostic ignored \"-Wunused-variable\"",
+        "#pragma GCC diagnostic ignored \"-Wunused-but-set-variable\"",
+        "#pragma GCC diagnostic ignored \"-Wunused-function\"", "#endif",
+        "#include <math.h>", f"#define MD_ROT_OFFSET (NOBS + 1)", _ROTATION,
+        c, *fast,
+        "/* The dependent (calculated) parameters, from the model's bindings, in evaluation order. */",
+        "static void md_dependent(double *p) {", *body, "}", ""])
+
+
+def _fmt(x) -> str:
+    return repr(float(x))
+
+
+def model_description_text(exported: dict, t: dict, ident: str, fmi_version: int) -> str:
+    v = t["variables"]
+    desc = escape(f"{exported['model']} exported from modelica/ArmExo by modelica {EXPORTER_VERSION} "
+                  "(fixed-step RK4 in the project's FMI framework)")
+    units = sorted({x["unit"] for x in v if x["unit"]})
+    unit_lines = ["  <UnitDefinitions>"]
+    for u in units:
+        if u in UNITS:
+            attrs = " ".join(f'{k}="{e}"' for k, e in UNITS[u].items())
+            unit_lines.append(f'    <Unit name="{escape(u)}"><BaseUnit {attrs}/></Unit>')
+        else:
+            unit_lines.append(f'    <Unit name="{escape(u)}"/>')
+    unit_lines.append("  </UnitDefinitions>")
+    head = ['<?xml version="1.0" encoding="UTF-8"?>', "<fmiModelDescription",
+            f'  fmiVersion="{fmi_version}.0"', f'  modelName="{exported["model"]}"',
+            (f'  guid="{t["guid"]}"' if fmi_version == 2 else f'  instantiationToken="{t["guid"]}"'),
+            f'  description="{desc}"', f'  generationTool="modelica {EXPORTER_VERSION} + fmus/modelica_build.py"',
+            '  variableNamingConvention="structured"' + ('\n  numberOfEventIndicators="0">' if fmi_version == 2 else ">"), ""]
+    if fmi_version == 2:
+        head += [f'  <CoSimulation modelIdentifier="{ident}" canHandleVariableCommunicationStepSize="true"'
+                 ' canGetAndSetFMUstate="true" canNotUseMemoryManagementFunctions="true">',
+                 "    <SourceFiles>", f'      <File name="{ident}_all.c"/>', "    </SourceFiles>",
+                 "  </CoSimulation>", ""]
+    else:
+        head += [f'  <CoSimulation modelIdentifier="{ident}" canHandleVariableCommunicationStepSize="true"'
+                 ' canGetAndSetFMUState="true" canSerializeFMUState="false" hasEventMode="false"'
+                 ' canReturnEarlyAfterIntermediateUpdate="false"/>', ""]
+    out = head + unit_lines + ["", '  <DefaultExperiment startTime="0" stopTime="2" stepSize="0.001"/>', "",
+                               "  <ModelVariables>"]
+    if fmi_version == 3:
+        out.append(f'    <Float64 name="time" valueReference="{len(v)}" causality="independent" '
+                   'variability="continuous" unit="s" description="Simulation time"/>')
+    for i, x in enumerate(v):
+        variability = "fixed" if x["causality"] == "parameter" else "continuous"
+        attrs = [f'name="{escape(x["name"])}"', f'valueReference="{i}"', f'causality="{x["causality"]}"',
+                 f'variability="{variability}"']
+        if x["causality"] == "parameter":
+            attrs.append('initial="exact"')
+        extra = []
+        if x["causality"] != "output" and x["start"] is not None:
+            extra.append(f'start="{_fmt(x["start"])}"')
+        if x["unit"]:
+            extra.append(f'unit="{escape(x["unit"])}"')
+        if x["min"] is not None:
+            extra.append(f'min="{_fmt(x["min"])}"')
+        d = f'description="{escape(x["description"])}"'
+        if fmi_version == 2:
+            out.append(f"    <!-- index {i + 1} -->")
+            out.append(f'    <ScalarVariable {" ".join(attrs)} {d}>')
+            out.append(f'      <Real {" ".join(extra)}/>')
+            out.append("    </ScalarVariable>")
+        else:
+            out.append(f'    <Float64 {" ".join(attrs + extra)} {d}/>')
+    out += ["  </ModelVariables>", "", "  <ModelStructure>"]
+    outs = [i for i, x in enumerate(v) if x["causality"] == "output"]
+    if fmi_version == 2:
+        out += ["    <Outputs>", *(f'      <Unknown index="{k + 1}"/>' for k in outs), "    </Outputs>",
+                "    <InitialUnknowns>", *(f'      <Unknown index="{k + 1}"/>' for k in outs),
+                "    </InitialUnknowns>"]
+    else:
+        out += [f'    <Output valueReference="{k}"/>' for k in outs]
+        out += [f'    <InitialUnknown valueReference="{k}"/>' for k in outs]
+    out += ["  </ModelStructure>", "", "</fmiModelDescription>", ""]
+    return "\n".join(out)
+
+
+_BUILD_DESCRIPTION = """<?xml version="1.0" encoding="UTF-8"?>
+<fmiBuildDescription fmiVersion="3.0">
+  <BuildConfiguration modelIdentifier="{ident}">
+    <SourceFileSet language="C99">
+      <SourceFile name="{ident}_all.c"/>
+      <PreprocessorDefinition name="FMI_VERSION" value="3"/>
+    </SourceFileSet>
+  </BuildConfiguration>
+</fmiBuildDescription>
+"""
+
+
+def build_fmu(out_dir=None, *, cc: str | None = None, fmi_version: int = 2, n: int = 2,
+              exported: dict | None = None) -> Path:
+    """Export (or take from the cache), compile and package one Modelica plant FMU.
+
+    Parameters
+    ----------
+    out_dir : path, optional
+        Folder of the FMU (default ``fmus/build/``).
+    cc : str, optional
+        C compiler (default ``$CC`` or ``cc``).
+    fmi_version : {2, 3}
+    n : {2, 3}
+        ``ArmExo.ArmExoPlant`` or ``ArmExo.ArmExoPlant3``.
+    exported : dict, optional
+        The exporter's result (default: :func:`export`).
+
+    Returns
+    -------
+    Path of the ``.fmu`` (written atomically).
+
+    Raises
+    ------
+    ExporterUnavailable, BuildError
+    """
+    if fmi_version not in FMI_HEADERS:
+        raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
+    exported = exported if exported is not None else export(n)
+    out_dir = Path(out_dir) if out_dir is not None else BUILD_DIR
+    out_dir.mkdir(parents=True, exist_ok=True)
+    cc = cc or os.environ.get("CC", "cc")
+    plat, ext = _platform(fmi_version)
+    ident, name = identifier(n), fmu_name(fmi_version, n)
+    t = table(exported)
+    with tempfile.TemporaryDirectory(prefix="armexo-modelica-") as tmp:
+        src = Path(tmp) / "sources"
+        src.mkdir()
+        for f in sorted(FRAMEWORK_DIR.glob("*.[ch]")):
+            shutil.copy2(f, src / f.name)
+        shutil.copy2(GLUE_DIR / "config.h", src / "config.h")
+        shutil.copy2(GLUE_DIR / "model.c", src / "model.c")
+        shutil.copy2(GLUE_DIR / "ArmExoModelica_all.c", src / f"{ident}_all.c")
+        (src / "variables.h").write_text(header_text(exported, t, ident))
+        (src / "generated.c").write_text(generated_c(exported))
+        for h in FMI_HEADERS[fmi_version]:
+            shutil.copy2(_fmi_header_dir() / h, src / h)
+        if fmi_version == 3:
+            (src / "buildDescription.xml").write_text(_BUILD_DESCRIPTION.format(ident=ident))
+        description = Path(tmp) / "modelDescription.xml"
+        description.write_text(model_description_text(exported, t, ident, fmi_version))
+        lib = Path(tmp) / f"{ident}{ext}"
+        cmd = [cc, *[f for f in CFLAGS if f != "-Wextra"], f"-DFMI_VERSION={fmi_version}", "-I", str(src),
+               "-o", str(lib), str(src / f"{ident}_all.c"), "-lm"]
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True)
+        except FileNotFoundError as exc:
+            raise BuildError(f"C compiler {cc!r} not found; install a C compiler or set CC") from exc
+        if proc.returncode != 0:
+            raise BuildError(f"compiling the exported FMU failed ({' '.join(cmd)}):\n{proc.stderr[-4000:]}")
+        tmp_fmu = out_dir / f".{name}.{os.getpid()}.tmp"
+        with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
+            z.write(description, "modelDescription.xml")
+            z.write(lib, f"binaries/{plat}/{ident}{ext}")
+            for f in sorted(src.iterdir()):
+                z.write(f, f"sources/{f.name}")
+            z.writestr("documentation/readme.md",
+                       f"# {exported['model']}\n\nExported from the Modelica package modelica/ArmExo by "
+                       f"modelica {EXPORTER_VERSION} (fmus/modelica_build.py); see docs/plant.md.\n")
+        os.replace(tmp_fmu, out_dir / name)
+    return out_dir / name
+
+
+def default_fmu_path(build_if_missing: bool = True, *, fmi_version: int = 2, n: int = 2) -> Path:
+    """``fmus/build/ArmExoPlant_modelica.fmu`` (or ``_fmi3``, or ``ArmExoPlant3_modelica``),
+    (re)built when missing or older than a source (Modelica files, exporter, framework).
+
+    Raises
+    ------
+    ExporterUnavailable
+        It must be built and no exporter interpreter exists.
+    """
+    path = BUILD_DIR / fmu_name(fmi_version, n)
+    sources = (list(MODELICA_DIR.rglob("*.mo")) + list(EXPORT_DIR.glob("*.py")) + list(GLUE_DIR.iterdir())
+               + list(FRAMEWORK_DIR.iterdir()) + [Path(__file__)])
+    if path.exists() and (not build_if_missing
+                          or max(f.stat().st_mtime for f in sources) <= path.stat().st_mtime):
+        return path
+    if not build_if_missing:
+        raise FileNotFoundError(f"{path} not built: run `python -m fmus.build`")
+    return build_fmu(fmi_version=fmi_version, n=n)
+
+
+def build_all(out_dir=None, *, cc: str | None = None, log=print) -> list[Path]:
+    """Every exported plant (FMI 2.0 and 3.0 for two joints, FMI 2.0 for three); a plant the
+    exporter cannot export is reported in one line and skipped.
+
+    Raises
+    ------
+    ExporterUnavailable
+        No exporter interpreter (the caller falls back to the C plant).
+    """
+    python, built, unavailable = None, [], None
+    for n in sorted(MODELS):
+        try:
+            if not (MODELICA_DIR / "package.mo").is_file():
+                raise ExporterUnavailable(f"the Modelica source {MODELICA_DIR} is missing")
+            cached = CACHE_DIR / f"{MODELS[n]}-{source_hash()[:16]}.json"
+            if not cached.exists() and python is None:
+                python = find_exporter()
+            exported = export(n, python=python)
+        except ExporterUnavailable as exc:
+            unavailable = exc
+            continue
+        except BuildError as exc:
+            log(f"note: the Modelica plant {MODELS[n]} was not exported: {exc}")
+            continue
+        for version in ((2, 3) if n == 2 else (2,)):
+            built.append(build_fmu(out_dir, cc=cc, fmi_version=version, n=n, exported=exported))
+    if unavailable is not None and not built:
+        raise unavailable
+    return built
+
+
+if __name__ == "__main__":
+    for p in build_all():
+        print(p)
+    sys.exit(0)
