@@ -16,7 +16,8 @@ def register(subparsers) -> None:
     """Add this package's subcommands to the orchestrator's argparse subparsers."""
     p = subparsers.add_parser("diagnose", help="diagnose the sim-to-real gap of a folder "
                               "of measured trials (report folder: Markdown, JSON, PNG)")
-    p.add_argument("folder", help="folder of trials (NAME.csv + NAME.json)")
+    p.add_argument("folder", help="folder of trials (NAME.csv + NAME.json, NAME.mat, or a "
+                   ".mat of NLID nldat objects), or one such file")
     p.add_argument("--out", required=True, help="report folder")
     p.add_argument("--effects", default=None,
                    help=f"comma-separated effects to try (default: all of "
@@ -64,11 +65,15 @@ def _diagnose(args) -> int:
     report = diagnose(args.folder, args.out, config=config, plant=args.fmu,
                       progress=not args.quiet, workers=args.workers,
                       scheduler=args.scheduler, rk4_step=args.rk4_step)
-    named = " + ".join(report.named)
-    print(f"verdict: {report.verdict}{': ' + named if named else ''}")
-    print(report.summary)
-    print(f"nominal gap {report.gap['nominal_all']:.3g} (threshold "
-          f"{report.gap['significance_threshold']:.3g}); report: {Path(args.out) / 'report.md'}")
+    reports = getattr(report, "reports", None) or {None: report}
+    for condition, one in reports.items():
+        named = " + ".join(one.named)
+        head = "" if condition is None else f"[{condition}] "
+        print(f"{head}verdict: {one.verdict}{': ' + named if named else ''}")
+        print(one.summary)
+        print(f"{head}nominal gap {one.gap['nominal_all']:.3g} (threshold "
+              f"{one.gap['significance_threshold']:.3g})")
+    print(f"report: {Path(args.out) / 'report.md'}")
     return 0
 
 
