@@ -20,7 +20,7 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, help="report folder")
     p.add_argument("--effects", default=None,
                    help=f"comma-separated effects to try (default: all of "
-                        f"{','.join(cat.CATALOGUE)})")
+                        f"{','.join(cat.effects_for('exoskeleton'))})")
     p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
     p.add_argument("--workers", type=int, default=None,
                    help="local processes for the simulations (default: one per core)")
@@ -51,7 +51,7 @@ def register(subparsers) -> None:
 
 def _effects(text):
     if not text:
-        return tuple(cat.CATALOGUE)
+        return cat.effects_for("exoskeleton")
     names = tuple(n.strip() for n in text.split(",") if n.strip())
     for n in names:
         cat.get_effect(n)

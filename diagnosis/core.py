@@ -91,7 +91,7 @@ class DiagnosisConfig:
     pair_gain: float = 0.5
     grid_points: int = 5
     refine_iterations: int = 6
-    effects: tuple = tuple(cat.CATALOGUE)
+    effects: tuple = cat.effects_for("exoskeleton")
 
 
 @dataclass

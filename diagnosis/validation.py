@@ -133,7 +133,8 @@ def draw_specs(rng: np.random.Generator, *, n_per_effect: int = 1, n_nominal: in
         return str(reps[int(rng.integers(len(reps)))])
 
     specs = []
-    for name, effect in cat.CATALOGUE.items():
+    for name in cat.effects_for("exoskeleton"):
+        effect = cat.get_effect(name)
         for i in range(n_per_effect):
             specs.append(SetSpec(f"{name}-{i}", ((name, effect.draw(rng)),),
                                  seeds=(int(rng.integers(1, 10_000)),),
@@ -149,7 +150,7 @@ def draw_specs(rng: np.random.Generator, *, n_per_effect: int = 1, n_nominal: in
                              seeds=(int(rng.integers(1, 10_000)),),
                              extra={"name": out["name"], **out["draw"](rng)},
                              levels=out["levels"], representation=rep(), **common))
-    names = list(cat.CATALOGUE)
+    names = list(cat.effects_for("exoskeleton"))
     for i in range(n_pairs):
         a, b = pairs[i % len(pairs)] if pairs else rng.choice(names, 2, replace=False)
         specs.append(SetSpec(f"pair-{a}+{b}-{i}", ((a, cat.get_effect(a).draw(rng)),
