@@ -20,8 +20,10 @@ def register(subparsers) -> None:
                    ".mat of NLID nldat objects), or one such file")
     p.add_argument("--out", required=True, help="report folder")
     p.add_argument("--effects", default=None,
-                   help=f"comma-separated effects to try (default: all of "
-                        f"{','.join(cat.CATALOGUE)})")
+                   help="comma-separated effects to try (default: every catalogue effect "
+                        "that applies to the trials' experiment: "
+                        f"exoskeleton {','.join(cat.effects_for('exoskeleton'))}; "
+                        f"position {','.join(cat.effects_for('position'))})")
     p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
     p.add_argument("--workers", type=int, default=None,
                    help="local processes for the simulations (default: one per core)")
@@ -52,7 +54,7 @@ def register(subparsers) -> None:
 
 def _effects(text):
     if not text:
-        return tuple(cat.CATALOGUE)
+        return tuple(cat.CATALOGUE)  # the experiment keeps those that apply to it
     names = tuple(n.strip() for n in text.split(",") if n.strip())
     for n in names:
         cat.get_effect(n)

@@ -78,11 +78,10 @@ class Experiment:
     def applicable_effects(self, names) -> tuple:
         """The effects of ``names`` that apply to this experiment (catalogue order kept).
 
-        An effect applies when its catalogue entry lists this experiment's kind in
-        ``experiments``; an entry without that attribute is an exoskeleton effect.
+        An effect applies when its catalogue entry lists this experiment's kind in its
+        ``kinds`` (catalogue.Effect.applies_to).
         """
-        return tuple(n for n in names
-                     if self.kind in getattr(CATALOGUE[n], "experiments", ("exoskeleton",)))
+        return tuple(n for n in names if CATALOGUE[n].applies_to(self.kind))
 
     # ------------------------------------------------------------------ model
     def estimate(self, trials):
