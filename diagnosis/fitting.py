@@ -10,7 +10,7 @@ step of the first.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import optimize
@@ -38,6 +38,12 @@ class EffectFit:
     n_evaluations: int
     held_out_gap: float = math.nan
     objective: float = math.nan
+    #: effect -> {param: [low, high]} 95 % intervals, where the fit gives them
+    intervals: dict | None = None
+    #: the limb re-estimated with the effect (an experiment whose fit re-estimates it)
+    model: object = None
+    #: further reasons never to name this fit (e.g. an unphysical negative gain)
+    bound_flags: list = field(default_factory=list)
 
     def simulation_effects(self, n_dof) -> dict:
         return {e: cat.expand_effect(e, self.params[e], n_dof) for e in self.effects}
@@ -47,7 +53,10 @@ class EffectFit:
         """Scored parameters fitted on a search bound (catalogue.at_search_bound), as
         ``"effect: param = value at upper search bound"``; such a fit is never named."""
         return [f"{e}: {flag}" for e in self.effects
-                for flag in cat.at_search_bound(e, self.params[e])]
+                for flag in cat.at_search_bound(e, self.params[e])] + [
+                    f for f in self.bound_flags
+                    if not any(f in g for g in [", ".join(cat.at_search_bound(
+                        e, self.params[e])) for e in self.effects])]
 
     @property
     def nameable(self) -> bool:

@@ -40,13 +40,15 @@ class DiagnosisReport:
     elapsed_s: float
     trials: list
     experiment: dict = field(default_factory=dict)
+    intervals: dict = field(default_factory=dict)
     out_dir: object = None
     extras: dict = field(default_factory=dict, repr=False)
 
     def to_dict(self) -> dict:
         return {"format": "arm-impedance-diagnosis/1", "verdict": self.verdict,
                 "summary": self.summary, "named_effects": self.named,
-                "fitted_parameters": self.fitted, "amplitude_dependence": self.amplitude,
+                "fitted_parameters": self.fitted, "fitted_intervals_95": self.intervals,
+                "amplitude_dependence": self.amplitude,
                 "conventions": self.conventions, "numerical_retries": self.numerics,
                 "timing": self.timing,
                 "ranking": self.ranking, "pairs": self.pairs, "gap": self.gap,
@@ -130,7 +132,13 @@ def markdown(report) -> str:
              + (f" — {' + '.join(report.named)}" if report.named else ""), "",
              report.summary, ""]
     if report.named:
-        lines += [f"Fitted: {_params(report.fitted)}", "",
+        lines += [f"Fitted: {_params(report.fitted)}", ""]
+        if report.intervals:
+            lines += ["95 % intervals: " + "; ".join(
+                f"{e}: " + ", ".join(f"{k} [{_fmt(v[0], 4)}, {_fmt(v[1], 4)}]"
+                                     for k, v in d.items())
+                for e, d in report.intervals.items() if d), ""]
+        lines += [
                   f"Held-out gap {_fmt(g['nominal_held_out'])} -> {_fmt(g['named_held_out'])} "
                   f"(reduction {_fmt(100 * g['named_held_out_reduction'], 3)} %); "
                   f"all data {_fmt(g['nominal_all'])} -> {_fmt(g['named_all'])}.", ""]
@@ -278,8 +286,9 @@ def _plot_signals(report, frf_path: Path, noise_path: Path) -> None:
     signals = [s for s in experiment.output_signals(trial) if s != source]
     runs = [("measured", trial), ("nominal", ev.simulation(unit, {}))]
     if chosen is not None:
+        ev_named = report.extras.get("ev_named") or ev
         runs.append(("with " + " + ".join(chosen.effects),
-                     ev.simulation(unit, chosen.simulation_effects(trial.n_dof))))
+                     ev_named.simulation(unit, chosen.simulation_effects(trial.n_dof))))
     nper = ev.cfg.features.nperseg
     cols = len(signals)
     fig, axes = plt.subplots(2, cols, figsize=(4 * cols + 1, 6), sharex=True, squeeze=False)

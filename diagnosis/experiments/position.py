@@ -59,23 +59,18 @@ class PositionServo(Experiment):
         return estimate_arm(trials)
 
     def simulator(self, model, *, plant=None, rk4_step=None):
-        limb_api = _limb_api()
-        limb = _limb_model(limb_api, model)
+        from .. import limb as lm
+        limb = limb_of(model)
 
         def simulate(trial, effects, n_samples):
             n = int(n_samples)
             fs = trial.fs
             try:
-                if trial.theta_ref is not None and limb_api is not None:
-                    theta, tau = limb_api.servo_response(trial.theta_ref[:n], fs, limb,
-                                                         effects or {})
+                if trial.theta_ref is not None:
+                    theta, tau = lm.servo_response(trial.theta_ref[:n], fs, limb, effects or {})
                 else:
                     theta = np.array(trial.theta[:n], dtype=float)
-                    if limb_api is not None:
-                        tau = limb_api.limb_torque(theta, fs, limb, effects or {})
-                    else:
-                        tau = intrinsic_torque(theta, fs, model.K, model.B, model.M,
-                                               effects or {})
+                    tau = lm.limb_torque(theta, fs, limb, effects or {})
             except (FloatingPointError, OverflowError, np.linalg.LinAlgError):
                 return None
             theta, tau = np.asarray(theta, float), np.asarray(tau, float)
@@ -87,43 +82,66 @@ class PositionServo(Experiment):
                             name=f"{trial.name}-sim")
         return simulate
 
-    def describe(self) -> dict:
-        out = super().describe()
-        out["limb_model"] = ("diagnosis.limb" if _limb_api() is not None else
-                             "intrinsic K, B, I only (diagnosis.limb not installed)")
-        return out
+    # ------------------------------------------------------------------ fits
+    def fit_effects(self, trials, effects, config):
+        """Which / how far for a position experiment: every applicable effect fitted by
+        variable projection (diagnosis.limbfit: K, B, I and the effect's gain-like
+        parameters linear, the others searched), calibrated on the first
+        ``config.time_split_fraction`` of every trial, its gap on the rest (held out);
+        95 % jackknife intervals for the best fit.
+
+        Returns
+        -------
+        dict
+            ``fits`` (fitting.EffectFit, best first, each with ``intervals`` and the
+            re-estimated limb as ``model``), ``g0_cal``, ``g0_held``, ``g0_all``,
+            ``significant``, ``threshold``, ``noise_floor``, ``measure``.
+        """
+        from .. import limbfit as lf
+        from ..fitting import EffectFit
+        cfg = lf.FitConfig(held_out_fraction=1.0 - config.time_split_fraction,
+                           effects=tuple(effects))
+        records = [lf.PositionRecord.from_trial(t) for t in trials]
+        preps = lf.prepare(records, cfg)
+        nominal = lf.fit_nominal(preps, cfg)
+        g = nominal["gaps"]
+        significant = bool(g["all"].significant(cfg))
+        names = lf.candidates(preps, effects) if effects else []
+        fits = [lf.fit_effect(preps, nm, nominal, cfg, intervals=False) for nm in names]
+        fits.sort(key=lambda f: f.calibration_objective)
+        if fits and cfg.n_jackknife >= 2:
+            lf.add_intervals(fits[0], cfg)
+        out = []
+        for f in fits:
+            fit = EffectFit((f.effect,), {f.effect: dict(f.params)}, f.calibration_gap,
+                            f.n_evaluations, held_out_gap=f.held_out_gap,
+                            objective=f.calibration_objective)
+            fit.intervals = None if f.intervals is None else {f.effect: f.intervals}
+            fit.model = model_of(f.limb, trials[0].fs, "limbfit with " + f.effect)
+            fit.bound_flags = list(f.at_search_bound)
+            out.append(fit)
+        return {"fits": out, "g0_cal": g["cal"].value, "g0_held": g["held"].value,
+                "g0_all": g["all"].value, "significant": significant,
+                "threshold": float(cfg.significance_sigma * g["all"].se
+                                   + cfg.floor_margin * g["all"].floor),
+                "noise_floor": float(g["all"].floor),
+                "measure": "limbfit: band energy of the torque residual above the noise "
+                           "floor, relative to the torque energy (diagnosis.limbfit)",
+                "nominal_limb": model_of(nominal["limb"], trials[0].fs, "limbfit nominal")}
 
 
-def _limb_api():
-    """The limb forward models (diagnosis.limb), None where that module is absent."""
-    try:
-        from .. import limb
-    except ImportError:
-        return None
-    return limb
+def limb_of(model):
+    """The diagnosis.limb.LimbModel of an ArmModel (I = the fitted inertia M)."""
+    from .. import limb as lm
+    return lm.LimbModel(K=np.atleast_2d(np.asarray(model.K, float)),
+                        B=np.atleast_2d(np.asarray(model.B, float)),
+                        I=np.atleast_2d(np.asarray(model.M, float)))
 
 
-def _limb_model(api, model):
-    if api is None:
-        return None
-    return api.LimbModel(K=np.asarray(model.K, float), B=np.asarray(model.B, float),
-                         I=np.asarray(model.M, float))
-
-
-def intrinsic_torque(theta, fs, K, B, I, effects=None):
-    """Torque of the intrinsic limb ``tau = I theta'' + B theta' + K theta`` [N m], (N, n).
-
-    ``theta`` (N, n) [rad] at ``fs`` [Hz]; K, B, I (n, n). Derivatives by second-order
-    central differences (one-sided at the ends): the inertial term is exact to
-    (w/fs)^2 / 12 (0.5 % at 40 Hz, 1 kHz). Used only where diagnosis.limb is absent: then
-    no effect can be simulated (DiagnosisInputError for a non-empty ``effects``).
-    """
-    if effects:
-        raise DiagnosisInputError(f"effects {sorted(effects)} need diagnosis.limb (the limb "
-                                  f"forward models), which is not installed")
-    theta = np.asarray(theta, float)
-    omega = np.gradient(theta, 1.0 / fs, axis=0)
-    alpha = np.zeros_like(theta)
-    alpha[1:-1] = (theta[2:] - 2.0 * theta[1:-1] + theta[:-2]) * fs * fs
-    alpha[0], alpha[-1] = alpha[1], alpha[-2]
-    return alpha @ np.asarray(I).T + omega @ np.asarray(B).T + theta @ np.asarray(K).T
+def model_of(limb, fs, method):
+    """An ArmModel holding a limbfit LimbModel (for the simulator and the report)."""
+    from ..arm import ArmModel
+    n = limb.K.shape[0]
+    return ArmModel(M=np.asarray(limb.I, float), B=np.asarray(limb.B, float),
+                    K=np.asarray(limb.K, float), r2=np.full((n, n), np.nan), method=method,
+                    fs=fs, inertia_delay_s=0.0)

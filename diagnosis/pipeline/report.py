@@ -23,6 +23,8 @@ def build(r) -> DiagnosisReport:
     behind = None if chosen is None else r.experiment.model_with(
         r.model, chosen.simulation_effects(r.n_dof))
     model["behind_named_compliance"] = None if behind is None else behind.to_dict()
+    if chosen is not None and chosen.model is not None:
+        model["with_named_effect"] = chosen.model.to_dict()
     from .how_far import reduction
     return DiagnosisReport(
         verdict=r.verdict, named=r.named, summary=r.summary, amplitude=r.amplitude,
@@ -32,6 +34,7 @@ def build(r) -> DiagnosisReport:
                 "phases": r.timings,
                 "resumed_tasks": 0 if r.resume is None else r.resume.n_reused},
         fitted={} if chosen is None else chosen.params,
+        intervals={} if chosen is None or not chosen.intervals else chosen.intervals,
         ranking=r.ranking, pairs=r.pair_rows,
         gap={"nominal_all": r.nominal_all.value, "nominal_calibration": r.g0_cal,
              "nominal_held_out": r.g0_held,
@@ -40,7 +43,8 @@ def build(r) -> DiagnosisReport:
              "named_held_out": None if chosen is None else chosen.held_out_gap,
              "named_held_out_reduction": None if chosen is None else
              reduction(r.g0_held, chosen.held_out_gap),
-             "named_all": None if r.after is None else r.after.value},
+             "named_all": None if r.after is None else r.after.value,
+             **({"fit_measure": r.fit_measure} if r.fit_measure else {})},
         where=r.where, arm=model,
         split={"rule": r.rule,
                "calibration": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
@@ -53,6 +57,7 @@ def build(r) -> DiagnosisReport:
         experiment={**r.experiment.describe(), "effects_tried": list(r.effects),
                     "effects_not_applicable": list(r.skipped_effects)},
         extras={"nominal_all": r.nominal_all, "after_all": r.after, "ev_all": r.ev_all,
+                "ev_named": r.ev_named,
                 "chosen": chosen, "trials": r.trials, "experiment": r.experiment})
 
 

@@ -59,6 +59,7 @@ class DiagnosisRun:
     pairs: list = field(default_factory=list)
     significant: bool = False
     n_worker_sims: int = 0
+    fit_measure: dict | None = None   # an experiment's own fit measure (which)
     ranking: list = field(default_factory=list)
     pair_rows: list = field(default_factory=list)
     # verdict
@@ -66,6 +67,7 @@ class DiagnosisRun:
     named: list = field(default_factory=list)
     chosen: object = None
     after: object = None
+    ev_named: object = None
     amplitude: dict = field(default_factory=dict)
     summary: str = ""
     timings: list = field(default_factory=list)

@@ -18,12 +18,23 @@ def run(r) -> None:
     ``r.summary``, ``r.timings``."""
     verdict, named, chosen = choose(r.significant, r.singles, r.pairs, r.g0_held, r.config)
     after = None
-    if chosen is not None:
+    if chosen is not None and chosen.model is not None:
+        # the fit re-estimated the limb with the effect: the named model is that limb
+        from ..evaluation import Evaluator, Unit
+        simulate = r.experiment.simulator(chosen.model, plant=r.state.plant,
+                                          rk4_step=r.rk4_step)
+        full = [Unit(t, 0, t.n_samples, "all") for t in r.trials]
+        r.ev_named = Evaluator(r.experiment, simulate, full, r.config,
+                               norms=r.ev_all.norms)
+        after = r.ev_named.gap(chosen.simulation_effects(r.n_dof))
+        r.where["named"] = None if after is None else where_breakdown(after)
+    elif chosen is not None:
         effects = chosen.simulation_effects(r.n_dof)
         runs = r.map(task_simulate, [(i, effects) for i in range(len(r.trials))],
                      "named model runs")
         prefill(r.cache, r.trials, effects, runs)
         after = r.ev_all.gap(effects)
+        r.ev_named = r.ev_all
         r.where["named"] = None if after is None else where_breakdown(after)
     r.timings = list(r.runner.timings)
     residual = after if after is not None else r.nominal_all

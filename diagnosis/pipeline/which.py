@@ -19,7 +19,19 @@ def residual_needs_pair(best, cfg) -> bool:
 
 
 def run(r) -> None:
-    """Fill ``r.singles`` and ``r.pairs`` (sorted by calibration gap, then objective)."""
+    """Fill ``r.singles`` and ``r.pairs`` (sorted by calibration gap, then objective).
+
+    An experiment with its own fits (``fit_effects``, e.g. the position servo's variable
+    projection) gives the fits, their held-out gaps and the nominal gaps of its measure.
+    """
+    own = getattr(r.experiment, "fit_effects", None)
+    if own is not None:
+        out = own(r.trials, r.effects, r.config)
+        r.singles, r.pairs = out["fits"], []
+        r.g0_cal, r.g0_held, r.significant = out["g0_cal"], out["g0_held"], out["significant"]
+        r.fit_measure = {k: v for k, v in out.items() if k not in ("fits", "nominal_limb")}
+        r.n_worker_sims += sum(f.n_evaluations for f in r.singles)
+        return
     norms = (r.ev_cal.norms, r.ev_held.norms)
     key = lambda f: (f.calibration_gap, f.objective)  # noqa: E731
     # the costliest (scalar searches) first so that the workers stay busy
