@@ -7,7 +7,9 @@
 - :class:`PositionServo`: ``perturbation.kind = "position"``: an actuator servo imposes
   the angle, a torque sensor between actuator and limb measures; the limb model
   (diagnosis.limb) is driven by the recorded reference through the servo, or by the
-  measured angle when no reference was recorded.
+  measured angle when no reference was recorded;
+- :class:`RenderedImpedance`: torque perturbation on a set-up with no plant model (no
+  ``robot`` block, or no plant FMU of its joints): the robot renders M_rd, B_rd, K_rd.
 
 A new apparatus is one new :class:`Experiment` subclass added to ``EXPERIMENTS``.
 """
@@ -18,9 +20,10 @@ from ..errors import DiagnosisInputError
 from .base import Experiment
 from .exoskeleton import ExoskeletonIMBIC
 from .position import PositionServo
+from .rendered import RenderedImpedance
 
 #: tried in order; the first whose ``accepts(trials)`` is true models the trials
-EXPERIMENTS = (PositionServo, ExoskeletonIMBIC)
+EXPERIMENTS = (PositionServo, RenderedImpedance, ExoskeletonIMBIC)
 
 
 def experiment_for(trials) -> Experiment:
@@ -44,4 +47,5 @@ def experiment_for(trials) -> Experiment:
                               + ", ".join(c.__name__ for c in EXPERIMENTS))
 
 
-__all__ = ["EXPERIMENTS", "Experiment", "ExoskeletonIMBIC", "PositionServo", "experiment_for"]
+__all__ = ["EXPERIMENTS", "Experiment", "ExoskeletonIMBIC", "PositionServo",
+           "RenderedImpedance", "experiment_for"]
