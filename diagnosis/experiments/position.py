@@ -106,7 +106,8 @@ class PositionServo(Experiment):
         nominal = lf.fit_nominal(preps, cfg)
         g = nominal["gaps"]
         significant = bool(g["all"].significant(cfg))
-        names = lf.candidates(preps, effects) if effects else []
+        # effects are fitted only when there is a gap to explain (as limbfit does)
+        names = lf.candidates(preps, effects) if effects and significant else []
         fits = [lf.fit_effect(preps, nm, nominal, cfg, intervals=False) for nm in names]
         fits.sort(key=lambda f: f.calibration_objective)
         if fits and cfg.n_jackknife >= 2:
