@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -69,7 +70,11 @@ def load_trials(source, *, min_samples: int = tf.MIN_SAMPLES,
     read = []
     for path in trial_paths(source):
         try:
-            read.append(read_trial(path, min_samples=min_samples))
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                read.append(read_trial(path, min_samples=min_samples))
+            for w in caught:  # a file read whole: its warnings are the user's to see
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         except (tf.TrialFormatError, ValueError) as exc:
             from .nldat import read_nldat_trials
             found = read_nldat_trials(path, min_samples=min_samples) \
