@@ -75,7 +75,10 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         trials = next(iter(groups.values()))
         return run(DiagnosisRun(source=source, out_dir=out_dir, trials=trials,
                                 **options)).report
+    from .pipeline.report import check_out_dir
     from .report import write_set_index
+    if out_dir is not None:
+        check_out_dir(out_dir, source)  # the index folder too holds nothing of the user's
     reports = {}
     for condition, trials in groups.items():
         sub = None if out_dir is None else Path(out_dir) / _safe(condition)

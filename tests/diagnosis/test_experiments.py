@@ -149,3 +149,37 @@ def test_position_reflex_is_named(tmp_path):
     assert lo <= report.fitted["stretch_reflex"]["delay_s"] <= hi
     assert report.gap["named_held_out_reduction"] >= 0.7
     assert (tmp_path / "out" / "frf_compare.png").is_file()
+
+
+def test_resume_store_round_trips_fits_runs_and_divergences(tmp_path, make_linear_trial):
+    """What a killed run stored is read back as it was (no pickle), and a task stored is
+    not run again."""
+    import math
+
+    from diagnosis.fitting import EffectFit
+    from diagnosis.pipeline.resume import ResumeStore
+
+    fit = EffectFit(("friction",), {"friction": {"Fc": 0.2}}, 0.5, 11, held_out_gap=math.inf,
+                    objective=-0.1)
+    trial = make_linear_trial(n_samples=9000)
+    calls = []
+
+    class Runner:
+        def map(self, fn, args, desc="", done=None):
+            out = []
+            for i, a in enumerate(args):
+                calls.append(a)
+                out.append(fn(None, *a))
+                done(i, out[-1])
+            return out
+
+    def task(state, i):
+        return [fit, trial, None][i]
+
+    store = ResumeStore(tmp_path, "k")
+    first = store.map(Runner(), task, [(0,), (1,), (2,)], "t")
+    again = ResumeStore(tmp_path, "k").map(Runner(), task, [(0,), (1,), (2,), (0,)], "t")
+    assert len(calls) == 3  # the second store ran nothing
+    assert again[0] == first[0] and again[3] == fit
+    np.testing.assert_array_equal(again[1].theta, trial.theta)
+    assert again[1].meta == trial.meta and again[2] is None
