@@ -73,8 +73,13 @@ def _diagnose(args) -> int:
         head = "" if condition is None else f"[{condition}] "
         print(f"{head}verdict: {one.verdict}{': ' + named if named else ''}")
         print(one.summary)
-        print(f"{head}nominal gap {one.gap['nominal_all']:.3g} (threshold "
-              f"{one.gap['significance_threshold']:.3g})")
+        fm = one.gap.get("fit_measure")
+        if fm:  # an experiment with its own fit measure (position servo: limbfit)
+            print(f"{head}nominal gap {fm['g0_all']:.3g} (threshold {fm['threshold']:.3g}, "
+                  f"{fm['measure'].split(':')[0]}); feature gap {one.gap['nominal_all']:.3g}")
+        else:
+            print(f"{head}nominal gap {one.gap['nominal_all']:.3g} (threshold "
+                  f"{one.gap['significance_threshold']:.3g})")
     print(f"report: {Path(args.out) / 'report.md'}")
     return 0
 
