@@ -173,6 +173,8 @@ class _Prepared:
         n, N = self.n, self.N
         cols = np.zeros((N, n, 3 * n * n))
         th = self.rec.theta
+        if scale is not None:
+            scale = np.broadcast_to(scale, th.shape)
         for j in range(n):
             for k in range(n):
                 c = j * n + k
@@ -368,13 +370,19 @@ def _nonlinear(name):
 
 
 def _to_x(p, v):
-    return math.log(v) if p.log else float(v)
+    """Search coordinate of value v: 0 at the lower bound, 1 at the upper (log scale for
+    log parameters)."""
+    t = (lambda u: math.log(u)) if p.log else float
+    lo, hi = p.bounds
+    return (t(v) - t(lo)) / (t(hi) - t(lo))
 
 
 def _from_x(p, x):
     lo, hi = p.bounds
-    v = math.exp(x) if p.log else float(x)
-    return min(max(v, lo), hi)
+    x = min(max(float(x), 0.0), 1.0)
+    if p.log:
+        return math.exp(math.log(lo) + x * (math.log(hi) - math.log(lo)))
+    return lo + x * (hi - lo)
 
 
 def _grid(p, n):
@@ -450,14 +458,12 @@ class _Problem:
         return best_x
 
     def _refine(self, x0, maxiter=None):
-        steps = []
-        for p, xi in zip(self.nl, x0):
-            lo, hi = _to_x(p, p.bounds[0]), _to_x(p, p.bounds[1])
-            steps.append(0.08 * (hi - lo) if not p.log else 0.15)
-        simplex = [x0] + [x0 + np.eye(len(x0))[i] * steps[i] for i in range(len(x0))]
+        step = 0.03 if maxiter is None else 0.01  # of the search span
+        simplex = [x0] + [x0 + np.eye(len(x0))[i] * (step if x0[i] < 0.5 else -step)
+                          for i in range(len(x0))]
         res = optimize.minimize(self.objective, x0, method="Nelder-Mead",
                                 options={"initial_simplex": np.array(simplex),
-                                         "xatol": 1e-3, "fatol": 1e-7,
+                                         "xatol": 2e-5, "fatol": 1e-8,
                                          "maxiter": maxiter or 40 * len(x0)})
         return res.x
 
