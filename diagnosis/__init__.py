@@ -10,13 +10,14 @@ Public API::
 
 from .catalogue import CATALOGUE, catalogue_table, expand_effect, get_effect
 from .core import (VERDICT_CONVENTION, VERDICT_EFFECT, VERDICT_NONE, VERDICT_PARTLY, VERDICT_UNEXPLAINED, DiagnosisConfig,
-                   DiagnosisReport, diagnose, split_units)
+                   DiagnosisReport, DiagnosisSet, diagnose, split_units)
+from .experiments import Experiment, experiment_for
 from .errors import DiagnosisInputError, DiagnosisSimulationError
 from .features import FeatureConfig, FeatureVector, grid_step, trial_features
 from .gap import GapResult, make_normaliser, set_gap, z_scores
 
 __all__ = ["CATALOGUE", "catalogue_table", "expand_effect", "get_effect", "VERDICT_EFFECT",
-           "VERDICT_CONVENTION", "VERDICT_NONE", "VERDICT_PARTLY", "VERDICT_UNEXPLAINED", "DiagnosisConfig", "DiagnosisReport",
+           "VERDICT_CONVENTION", "VERDICT_NONE", "VERDICT_PARTLY", "VERDICT_UNEXPLAINED", "DiagnosisConfig", "DiagnosisReport", "DiagnosisSet", "Experiment", "experiment_for",
            "diagnose", "split_units", "DiagnosisInputError", "DiagnosisSimulationError",
            "FeatureConfig", "FeatureVector", "grid_step", "trial_features", "GapResult",
            "make_normaliser", "set_gap", "z_scores"]

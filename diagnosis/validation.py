@@ -205,14 +205,14 @@ def nominal_gap(folder, *, config: DiagnosisConfig = DiagnosisConfig(), plant=No
         ``value`` is the (clipped) gap, ``excess`` the unclipped mean(z^2) - expected;
         None when the nominal model diverges.
     """
-    from .arm import estimate_arm
-    from .core import Evaluator, Unit
+    from .evaluation import Evaluator, Unit
+    from .experiments import experiment_for
     from .inputs import load_trials
-    from .simulate import nominal_setup
     trials = load_trials(folder)
-    setup = nominal_setup(trials[0].meta, estimate_arm(trials))
+    experiment = experiment_for(trials)
+    simulate = experiment.simulator(experiment.estimate(trials), plant=plant)
     units = [Unit(t, 0, t.n_samples, "all") for t in trials]
-    return Evaluator(setup, units, config, plant).gap({})
+    return Evaluator(experiment, simulate, units, config).gap({})
 
 
 def read_truth(folder) -> dict:
