@@ -176,14 +176,15 @@ def position_run(args) -> int:
     """The position-servo validation and the 60 s one-joint timing (module docstring)."""
     from diagnosis import position_validation as pv
     from diagnosis.validation import rate_text
-    work = Path(args.work + "_position")
+    work = Path(args.work + "_position" + ("" if args.via == "limbfit" else "_pipeline"))
     specs = pv.draw_position_specs(np.random.default_rng(args.seed),
                                    n_per_effect=args.per_effect, n_nominal=args.nominal,
                                    n_outside=max(args.outside, 4),
                                    duration_s=args.position_duration)
     specs = sorted(specs, key=lambda s: int(s.name.rsplit("-", 1)[1]))  # round robin
     t0 = time.perf_counter()
-    result = pv.run_position_validation(specs, work, workers=args.position_workers)
+    result = pv.run_position_validation(specs, work, workers=args.position_workers,
+                                        via=args.via)
     timing = position_timing(work)
     s = result["summary"]
     table = result["table_markdown"] + (
@@ -196,8 +197,9 @@ def position_run(args) -> int:
     RESULTS.mkdir(parents=True, exist_ok=True)
     out = {"summary": s, "rows": result["rows"], "timing_60s_one_joint": timing,
            "settings": dict(vars(args), work=work.name), "elapsed_s": time.perf_counter() - t0}
-    (RESULTS / "diagnosis_position.json").write_text(json.dumps(_clean(out), indent=2))
-    (RESULTS / "diagnosis_position_score.md").write_text(table)
+    tag = "" if args.via == "limbfit" else "_pipeline"
+    (RESULTS / f"diagnosis_position{tag}.json").write_text(json.dumps(_clean(out), indent=2))
+    (RESULTS / f"diagnosis_position{tag}_score.md").write_text(table)
     print(table)
     return 0
 
@@ -253,6 +255,10 @@ def main(argv=None) -> int:
                    help="position trial length [s]")
     p.add_argument("--position-workers", type=int, default=2,
                    help="position sets diagnosed side by side")
+    p.add_argument("--via", choices=("limbfit", "pipeline"), default="limbfit",
+                   help="position sets diagnosed by limbfit's which/how-far/verdict alone, "
+                        "or by the whole diagnosis pipeline (diagnosis.diagnose, with "
+                        "reports; slower); results *_position_pipeline.*")
     args = p.parse_args(argv)
     work = Path(args.work)
     if args.position:
