@@ -69,6 +69,7 @@ class FitConfig:
     lowpass_order : Butterworth order of the analysis low-pass (applied forwards and back).
     welch_s : Welch segment length [s].
     held_out_fraction : last part of every trial kept for the held-out check.
+    edge_s : (first, last) seconds of every trial left out of fits and gaps.
     n_jackknife : calibration blocks of the jackknife intervals (0: no intervals).
     significance_sigma, floor_margin : the nominal gap's significance threshold.
     name_reduction : held-out reduction an effect needs to be named.
@@ -87,6 +88,7 @@ class FitConfig:
     grid: int = 12
     refine_starts: int = 2
     effects: tuple = ()
+    edge_s: tuple = (1.0, 0.5)
 
 
 @dataclass
@@ -149,6 +151,14 @@ class _Prepared:
         self.cal = np.zeros(Nd, bool)
         self.cal[:n_cal] = True
         self.held = ~self.cal
+        # the ends are left out of every fit and gap: one-sided derivatives, the filters'
+        # start from rest and the zero-phase low-pass's edges live there
+        head, tail = int(round(cfg.edge_s[0] * self.fs_d)), int(round(cfg.edge_s[1] * self.fs_d))
+        if head + tail >= Nd // 2:
+            raise ValueError(f"{rec.name or 'trial'}: {N / rec.fs:g} s is too short for the "
+                             f"position fits (at least {4 * sum(cfg.edge_s):g} s)")
+        self.cal[:head] = False
+        self.held[Nd - tail:] = False
         if rec.theta_ref is not None:
             self.theta_lp = self.lp(rec.theta)
         self.t = (np.arange(N) / rec.fs)[::self.D]
@@ -338,7 +348,7 @@ class _Gap:
 def _gap(preps, residuals, angle_residuals, limb0, cfg, part: str) -> _Gap:
     ex = se2 = fl = 0.0
     for pr, r, ra in zip(preps, residuals, angle_residuals):
-        mask = pr.cal if part == "cal" else pr.held if part == "held" else np.ones(pr.Nd, bool)
+        mask = pr.cal if part == "cal" else pr.held if part == "held" else pr.cal | pr.held
         ref_e, _, _ = _band_energy(pr.tau_lp - pr.tau_lp[mask].mean(axis=0), pr, mask, cfg)
         e, s, f = _band_energy(r, pr, mask, cfg, _torque_floor(pr, limb0))
         ex += e / ref_e
