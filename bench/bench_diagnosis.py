@@ -184,7 +184,7 @@ def position_run(args) -> int:
     specs = sorted(specs, key=lambda s: int(s.name.rsplit("-", 1)[1]))  # round robin
     t0 = time.perf_counter()
     result = pv.run_position_validation(specs, work, workers=args.position_workers,
-                                        via=args.via)
+                                        via=args.via, score_only=args.score_only)
     timing = position_timing(work)
     s = result["summary"]
     table = result["table_markdown"] + (
@@ -196,6 +196,7 @@ def position_run(args) -> int:
         f"{timing['named']}\n")
     RESULTS.mkdir(parents=True, exist_ok=True)
     out = {"summary": s, "rows": result["rows"], "timing_60s_one_joint": timing,
+           "n_sets_drawn": len(specs), "n_sets_done": len(result["rows"]),
            "settings": dict(vars(args), work=work.name), "elapsed_s": time.perf_counter() - t0}
     tag = "" if args.via == "limbfit" else "_pipeline"
     (RESULTS / f"diagnosis_position{tag}.json").write_text(json.dumps(_clean(out), indent=2))

@@ -265,14 +265,18 @@ def score_position(d: lf.PositionDiagnosis, truth: dict) -> dict:
 
 def run_position_validation(specs, out_dir, *, cfg: lf.FitConfig = lf.FitConfig(),
                             progress: bool = True, workers: int = 1,
-                            via: str = "limbfit") -> dict:
+                            via: str = "limbfit", score_only: bool = False) -> dict:
     """Make, diagnose blind and score every set; resumable (a set's
     ``reports/NAME/score_row.json`` is written atomically once scored); ``workers``
-    processes run sets side by side; ``via``: as :func:`diagnose_folder`. Writes
+    processes run sets side by side; ``via``: as :func:`diagnose_folder`; ``score_only``: score the sets already
+    diagnosed (a run in progress or stopped) without running new ones. Writes
     ``score.json`` and ``score.md``."""
     from .validation import _jsonable, score_markdown, summarise
     out = Path(out_dir)
     todo = [s for s in specs if not (out / "reports" / s.name / "score_row.json").is_file()]
+    if score_only:
+        specs = [s for s in specs if s not in todo]
+        todo = []
     if workers > 1 and len(todo) > 1:
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(workers) as pool:
