@@ -219,7 +219,7 @@ def fractional_delay(x: np.ndarray, delay_samples: float) -> np.ndarray:
     lo = np.floor(idx)
     frac = (idx - lo)[:, None]
     i0 = np.clip(lo.astype(int), 0, n - 1)
-    i1 = np.clip(i0 + 1, 0, n - 1)
+    i1 = np.clip(lo.astype(int) + 1, 0, n - 1)
     return (1.0 - frac) * x[i0] + frac * x[i1]
 
 

@@ -69,6 +69,7 @@ class FitConfig:
     lowpass_order : Butterworth order of the analysis low-pass (applied forwards and back).
     welch_s : Welch segment length [s].
     held_out_fraction : last part of every trial kept for the held-out check.
+    edge_s : (first, last) seconds of every trial left out of fits and gaps.
     n_jackknife : calibration blocks of the jackknife intervals (0: no intervals).
     significance_sigma, floor_margin : the nominal gap's significance threshold.
     name_reduction : held-out reduction an effect needs to be named.
@@ -87,6 +88,7 @@ class FitConfig:
     grid: int = 12
     refine_starts: int = 2
     effects: tuple = ()
+    edge_s: tuple = (1.0, 0.5)
 
 
 @dataclass
@@ -149,6 +151,14 @@ class _Prepared:
         self.cal = np.zeros(Nd, bool)
         self.cal[:n_cal] = True
         self.held = ~self.cal
+        # the ends are left out of every fit and gap: one-sided derivatives, the filters'
+        # start from rest and the zero-phase low-pass's edges live there
+        head, tail = int(round(cfg.edge_s[0] * self.fs_d)), int(round(cfg.edge_s[1] * self.fs_d))
+        if head + tail >= Nd // 2:
+            raise ValueError(f"{rec.name or 'trial'}: {N / rec.fs:g} s is too short for the "
+                             f"position fits (at least {4 * sum(cfg.edge_s):g} s)")
+        self.cal[:head] = False
+        self.held[Nd - tail:] = False
         if rec.theta_ref is not None:
             self.theta_lp = self.lp(rec.theta)
         self.t = (np.arange(N) / rec.fs)[::self.D]
@@ -173,6 +183,8 @@ class _Prepared:
         n, N = self.n, self.N
         cols = np.zeros((N, n, 3 * n * n))
         th = self.rec.theta
+        if scale is not None:
+            scale = np.broadcast_to(scale, th.shape)
         for j in range(n):
             for k in range(n):
                 c = j * n + k
@@ -336,7 +348,7 @@ class _Gap:
 def _gap(preps, residuals, angle_residuals, limb0, cfg, part: str) -> _Gap:
     ex = se2 = fl = 0.0
     for pr, r, ra in zip(preps, residuals, angle_residuals):
-        mask = pr.cal if part == "cal" else pr.held if part == "held" else np.ones(pr.Nd, bool)
+        mask = pr.cal if part == "cal" else pr.held if part == "held" else pr.cal | pr.held
         ref_e, _, _ = _band_energy(pr.tau_lp - pr.tau_lp[mask].mean(axis=0), pr, mask, cfg)
         e, s, f = _band_energy(r, pr, mask, cfg, _torque_floor(pr, limb0))
         ex += e / ref_e
@@ -368,13 +380,19 @@ def _nonlinear(name):
 
 
 def _to_x(p, v):
-    return math.log(v) if p.log else float(v)
+    """Search coordinate of value v: 0 at the lower bound, 1 at the upper (log scale for
+    log parameters)."""
+    t = (lambda u: math.log(u)) if p.log else float
+    lo, hi = p.bounds
+    return (t(v) - t(lo)) / (t(hi) - t(lo))
 
 
 def _from_x(p, x):
     lo, hi = p.bounds
-    v = math.exp(x) if p.log else float(x)
-    return min(max(v, lo), hi)
+    x = min(max(float(x), 0.0), 1.0)
+    if p.log:
+        return math.exp(math.log(lo) + x * (math.log(hi) - math.log(lo)))
+    return lo + x * (hi - lo)
 
 
 def _grid(p, n):
@@ -450,14 +468,12 @@ class _Problem:
         return best_x
 
     def _refine(self, x0, maxiter=None):
-        steps = []
-        for p, xi in zip(self.nl, x0):
-            lo, hi = _to_x(p, p.bounds[0]), _to_x(p, p.bounds[1])
-            steps.append(0.08 * (hi - lo) if not p.log else 0.15)
-        simplex = [x0] + [x0 + np.eye(len(x0))[i] * steps[i] for i in range(len(x0))]
+        step = 0.03 if maxiter is None else 0.01  # of the search span
+        simplex = [x0] + [x0 + np.eye(len(x0))[i] * (step if x0[i] < 0.5 else -step)
+                          for i in range(len(x0))]
         res = optimize.minimize(self.objective, x0, method="Nelder-Mead",
                                 options={"initial_simplex": np.array(simplex),
-                                         "xatol": 1e-3, "fatol": 1e-7,
+                                         "xatol": 2e-5, "fatol": 1e-8,
                                          "maxiter": maxiter or 40 * len(x0)})
         return res.x
 

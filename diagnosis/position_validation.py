@@ -214,15 +214,33 @@ def draw_outside(rng: np.random.Generator, name: str) -> dict:
 class _ReportView:
     """What diagnosis.validation.score_one reads, from a PositionDiagnosis."""
 
-    def __init__(self, d: lf.PositionDiagnosis):
+    def __init__(self, d):
+        if not isinstance(d, lf.PositionDiagnosis):  # a pipeline report: as it is
+            self.__dict__.update({k: getattr(d, k) for k in (
+                "verdict", "named", "fitted", "ranking", "gap", "elapsed_s", "amplitude",
+                "conventions", "n_simulations")})
+            return
         self.verdict, self.named, self.fitted = d.verdict, d.named, d.fitted
         self.ranking, self.gap, self.elapsed_s = d.ranking, d.gap, d.elapsed_s
         self.amplitude, self.conventions = {}, []
         self.n_simulations = d.n_evaluations
 
 
-def diagnose_folder(folder, cfg: lf.FitConfig = lf.FitConfig()) -> lf.PositionDiagnosis:
-    """Read the position trials of ``folder`` (never a truth file) and diagnose them."""
+def diagnose_folder(folder, cfg: lf.FitConfig = lf.FitConfig(), *, via: str = "limbfit",
+                    out_dir=None):
+    """Diagnose the position trials of ``folder`` blind (never a truth file).
+
+    ``via="limbfit"``: read them with trialformat and run :func:`limbfit.diagnose_position`
+    (which / how far / verdict only, ``cfg``); ``via="pipeline"``: the whole diagnosis
+    (:func:`diagnosis.diagnose`: read, conventions, estimate, nominal, where, which, how
+    far, verdict, report into ``out_dir``), whose PositionServo experiment calls the same
+    fits with its own settings.
+    """
+    if via == "pipeline":
+        from .core import diagnose
+        return diagnose(folder, out_dir, progress=False, workers=1)
+    if via != "limbfit":
+        raise ValueError(f"via must be 'limbfit' or 'pipeline', not {via!r}")
     import trialformat as tf
     trials = tf.read_trials(folder)
     return lf.diagnose_position(trials, cfg)
@@ -234,35 +252,41 @@ def score_position(d: lf.PositionDiagnosis, truth: dict) -> dict:
     row = score_one(_ReportView(d), truth)
     row["experiment"] = f"position-{truth['n_dof']}dof"
     row["theta_ref_recorded"] = truth["theta_ref_recorded"]
-    row["intervals"] = d.intervals
+    row["intervals"] = intervals = getattr(d, "intervals", None) or {}
     for e in truth["effects"]:
         if "rectified" in e["params"] and e["name"] in d.fitted:
             row["rectified_correct"] = d.fitted[e["name"]].get("rectified") == \
                 e["params"]["rectified"]
-        ci = (d.intervals or {}).get(e["name"]) or {}
+        ci = intervals.get(e["name"]) or {}
         row["truth_in_interval"] = {k: bool(lo <= e["params"][k] <= hi)
                                     for k, (lo, hi) in ci.items() if k in e["params"]}
     return row
 
 
 def run_position_validation(specs, out_dir, *, cfg: lf.FitConfig = lf.FitConfig(),
-                            progress: bool = True, workers: int = 1) -> dict:
+                            progress: bool = True, workers: int = 1,
+                            via: str = "limbfit", score_only: bool = False) -> dict:
     """Make, diagnose blind and score every set; resumable (a set's
     ``reports/NAME/score_row.json`` is written atomically once scored); ``workers``
-    processes run sets side by side. Writes ``score.json`` and ``score.md``."""
+    processes run sets side by side; ``via``: as :func:`diagnose_folder`; ``score_only``: score the sets already
+    diagnosed (a run in progress or stopped) without running new ones. Writes
+    ``score.json`` and ``score.md``."""
     from .validation import _jsonable, score_markdown, summarise
     out = Path(out_dir)
     todo = [s for s in specs if not (out / "reports" / s.name / "score_row.json").is_file()]
+    if score_only:
+        specs = [s for s in specs if s not in todo]
+        todo = []
     if workers > 1 and len(todo) > 1:
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(workers) as pool:
             for i, _ in enumerate(pool.map(_run_one, todo, [out] * len(todo),
-                                           [cfg] * len(todo))):
+                                           [cfg] * len(todo), [via] * len(todo))):
                 if progress:
                     print(f"[{i + 1}/{len(todo)}] {todo[i].name}", flush=True)
     else:
         for i, s in enumerate(todo):
-            _run_one(s, out, cfg)
+            _run_one(s, out, cfg, via)
             if progress:
                 print(f"[{i + 1}/{len(todo)}] {s.name}", flush=True)
     rows = [json.loads((out / "reports" / s.name / "score_row.json").read_text())
@@ -284,17 +308,18 @@ def _rate_of(rows, key):
     return rate(sum(vals), len(vals))
 
 
-def _run_one(spec: PositionSetSpec, out: Path, cfg: lf.FitConfig) -> None:
+def _run_one(spec: PositionSetSpec, out: Path, cfg: lf.FitConfig, via: str = "limbfit"
+             ) -> None:
     row_path = out / "reports" / spec.name / "score_row.json"
     row_path.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     try:
         folder = make_position_set(spec, out / "sets")
-        d = diagnose_folder(folder, cfg)
+        d = diagnose_folder(folder, cfg, via=via, out_dir=row_path.parent / "report")
         truth = json.loads(next(folder.glob("*" + TRUTH_SUFFIX)).read_text())  # scoring only
         row = {"set": spec.name, **score_position(d, truth),
                "truth_params": {n: p for n, p in spec.effects}, "ranking": d.ranking[:3],
-               "gap": d.gap, "wall_s": time.perf_counter() - t0}
+               "gap": d.gap, "wall_s": time.perf_counter() - t0, "via": via}
     except Exception as exc:  # a set that cannot be made or diagnosed is reported
         row = {"set": spec.name, "error": f"{type(exc).__name__}: {exc}",
                "truth": sorted(n for n, _ in spec.effects)}

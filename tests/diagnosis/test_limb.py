@@ -119,3 +119,12 @@ def test_bad_input_is_named():
         limb_torque(bad, FS, LIMB)
     with pytest.raises(ValueError, match="differ in shape"):
         LimbModel(np.eye(2), 1.0, 1.0)
+
+
+def test_fractional_delay_shifts_a_ramp_exactly_and_holds_the_edges():
+    from diagnosis.limb import fractional_delay
+    x = np.arange(20.0)[:, None]
+    np.testing.assert_allclose(fractional_delay(x, 0.3)[1:, 0], x[1:, 0] - 0.3)
+    np.testing.assert_allclose(fractional_delay(x, 1e-9)[:, 0], x[:, 0], atol=1e-8)
+    np.testing.assert_allclose(fractional_delay(x, -2.5)[:17, 0], x[:17, 0] + 2.5)
+    assert fractional_delay(x, 0.3)[0, 0] == 0.0 and fractional_delay(x, -2.5)[-1, 0] == 19.0
