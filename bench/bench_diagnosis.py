@@ -13,6 +13,15 @@ default workers and with one process, side by side, and prints the speed-up.
 
     python bench/bench_diagnosis.py                          # ~70 sets, about an hour on 2 cores
     python bench/bench_diagnosis.py --timing-only --repeat 3 # 8-trial timing, 2 workers vs 1
+    python bench/bench_diagnosis.py --position               # position-servo sets (1 and 2
+                                                             # joints, limb/apparatus effects)
+
+``--position`` validates the position-servo experiments (diagnosis.position_validation:
+every limb/apparatus effect of the catalogue ``--per-effect`` times over its realistic
+range, one and two joints in turn, nominal and outside-catalogue sets, random storage
+representations), two sets at a time, and writes ``bench/results/diagnosis_position.json``
+and ``bench/results/diagnosis_position_score.md``; it also times the diagnosis of one
+60 s one-joint recording (a stretch reflex withheld).
 """
 
 from __future__ import annotations
@@ -163,6 +172,53 @@ def calibration_run(work: Path, duration_s: float, n_seeds: int,
             "nominal_median": float(np.median(gaps)), "n_nominal": int(gaps.size)}
 
 
+def position_run(args) -> int:
+    """The position-servo validation and the 60 s one-joint timing (module docstring)."""
+    from diagnosis import position_validation as pv
+    from diagnosis.validation import rate_text
+    work = Path(args.work + "_position" + ("" if args.via == "limbfit" else "_pipeline"))
+    specs = pv.draw_position_specs(np.random.default_rng(args.seed),
+                                   n_per_effect=args.per_effect, n_nominal=args.nominal,
+                                   n_outside=max(args.outside, 4),
+                                   duration_s=args.position_duration)
+    specs = sorted(specs, key=lambda s: int(s.name.rsplit("-", 1)[1]))  # round robin
+    t0 = time.perf_counter()
+    result = pv.run_position_validation(specs, work, workers=args.position_workers,
+                                        via=args.via, score_only=args.score_only)
+    timing = position_timing(work)
+    s = result["summary"]
+    table = result["table_markdown"] + (
+        f"\nreflex rectified or not, chosen right: {rate_text(s['rectified_correct'])}\n"
+        f"truth inside the 95 % jackknife interval (every parameter of the named effect): "
+        f"{rate_text(s['truth_in_95pct_interval'])}\n"
+        f"60 s one-joint recording diagnosed in {timing['elapsed_s']:.1f} s (one process, "
+        f"load {timing['load_average_1min']:.1f}); verdict {timing['verdict']} "
+        f"{timing['named']}\n")
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    out = {"summary": s, "rows": result["rows"], "timing_60s_one_joint": timing,
+           "n_sets_drawn": len(specs), "n_sets_done": len(result["rows"]),
+           "settings": dict(vars(args), work=work.name), "elapsed_s": time.perf_counter() - t0}
+    tag = "" if args.via == "limbfit" else "_pipeline"
+    (RESULTS / f"diagnosis_position{tag}.json").write_text(json.dumps(_clean(out), indent=2))
+    (RESULTS / f"diagnosis_position{tag}_score.md").write_text(table)
+    print(table)
+    return 0
+
+
+def position_timing(work: Path) -> dict:
+    """Diagnose one 60 s, 1 kHz one-joint position recording (reflex withheld), timed."""
+    from diagnosis import position_validation as pv
+    spec = pv.PositionSetSpec("timing-60s", (("stretch_reflex", {
+        "gain": 2.5, "delay_s": 0.045, "frequency_hz": 4.0, "rectified": False}),),
+        n_dof=1, seed=60, duration_s=60.0)
+    folder = pv.make_position_set(spec, work / "sets")
+    t0 = time.perf_counter()
+    d = pv.diagnose_folder(folder)
+    return {"elapsed_s": time.perf_counter() - t0, "verdict": d.verdict, "named": d.named,
+            "fitted": d.fitted, "intervals": d.intervals,
+            "load_average_1min": os.getloadavg()[0]}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--work", default="runs/diagnosis_validation",
@@ -193,8 +249,21 @@ def main(argv=None) -> int:
     p.add_argument("--calibration-seeds", type=int, default=2)
     p.add_argument("--no-floors", action="store_true",
                    help="with --calibrate: nominal-vs-nominal gaps only")
+    p.add_argument("--position", action="store_true",
+                   help="the position-servo validation (writes "
+                        "bench/results/diagnosis_position*.json/md)")
+    p.add_argument("--position-duration", type=float, default=30.0,
+                   help="position trial length [s]")
+    p.add_argument("--position-workers", type=int, default=2,
+                   help="position sets diagnosed side by side")
+    p.add_argument("--via", choices=("limbfit", "pipeline"), default="limbfit",
+                   help="position sets diagnosed by limbfit's which/how-far/verdict alone, "
+                        "or by the whole diagnosis pipeline (diagnosis.diagnose, with "
+                        "reports; slower); results *_position_pipeline.*")
     args = p.parse_args(argv)
     work = Path(args.work)
+    if args.position:
+        return position_run(args)
     if args.invariance:
         RESULTS.mkdir(parents=True, exist_ok=True)
         inv = invariance_run(work)

@@ -20,6 +20,9 @@ _EXPORTS = {
     'VERDICT_UNEXPLAINED': '.core',
     'DiagnosisConfig': '.core',
     'DiagnosisReport': '.core',
+    'DiagnosisSet': '.core',
+    'Experiment': '.experiments',
+    'experiment_for': '.experiments',
     'diagnose': '.core',
     'split_units': '.core',
     'DiagnosisInputError': '.errors',
@@ -35,7 +38,7 @@ _EXPORTS = {
 }
 
 __all__ = ["CATALOGUE", "catalogue_table", "expand_effect", "get_effect", "VERDICT_EFFECT",
-           "VERDICT_CONVENTION", "VERDICT_NONE", "VERDICT_PARTLY", "VERDICT_UNEXPLAINED", "DiagnosisConfig", "DiagnosisReport",
+           "VERDICT_CONVENTION", "VERDICT_NONE", "VERDICT_PARTLY", "VERDICT_UNEXPLAINED", "DiagnosisConfig", "DiagnosisReport", "DiagnosisSet", "Experiment", "experiment_for",
            "diagnose", "split_units", "DiagnosisInputError", "DiagnosisSimulationError",
            "FeatureConfig", "FeatureVector", "grid_step", "trial_features", "GapResult",
            "make_normaliser", "set_gap", "z_scores"]

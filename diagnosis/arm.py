@@ -4,7 +4,13 @@ The human arm is unknown in a real experiment: the diagnosis estimates the imped
 the measured trials (estimation package) and simulates with the second-order M, B, K
 fitted to it. With the robust tuning the held joints move, so the ``full`` estimator
 (Z = T P^-1, which uses both decomposition trials) is used; with all-joints trials the
-``closed_loop`` one.
+``closed_loop`` one; with position trials the estimator ``armimp estimate`` picks
+(``full`` from a recorded reference, else ``direct``, theta to tau_h).
+
+The fit handles sampling and leakage as ``armimp estimate`` does (estimation.lab.analyse):
+the left-limit delay of the inertial term only for trials that declare
+``sensors.torque_sampling = "left_limit"`` (or were simulated by this project's
+orchestrator), the Hann window's leakage modelled wherever the method allows it.
 """
 
 from __future__ import annotations
@@ -37,14 +43,34 @@ class ArmModel:
     f: np.ndarray | None = None
     Z: np.ndarray | None = None
     fs: float = 1000.0
+    #: delay of the inertial term of the fit [s] (None: the left-limit delay 0.5 / fs)
+    inertia_delay_s: float | None = None
+    leakage: bool = False
+    ci: dict | None = None
+
+    @property
+    def sampling_delay(self) -> float:
+        """The inertial-term delay of the fit [s] (estimation.accuracy.left_limit_delay
+        when the trials were sampled at the left limit, 0 when instantaneously)."""
+        return 0.5 / self.fs if self.inertia_delay_s is None else self.inertia_delay_s
 
     def to_dict(self) -> dict:
-        return {"M_h": self.M.tolist(), "B_h": self.B.tolist(), "K_h": self.K.tolist(),
-                "r2": self.r2.tolist(), "method": self.method}
+        out = {"M_h": self.M.tolist(), "B_h": self.B.tolist(), "K_h": self.K.tolist(),
+               "r2": self.r2.tolist(), "method": self.method,
+               "corrections": {"left_limit_sampling": self.sampling_delay > 0,
+                               "inertia_delay_s": self.sampling_delay,
+                               "window_leakage": self.leakage}}
+        if self.ci is not None:
+            out["ci95"] = {k: np.asarray(v).tolist() for k, v in self.ci.items()}
+        return out
 
 
 def estimator_method(trials) -> str:
-    """``full`` for decomposition trials (one joint each), ``closed_loop`` otherwise."""
+    """``full`` for decomposition trials (one joint each), ``closed_loop`` for all-joints
+    trials; for position trials ``full`` with a recorded reference, else ``direct``."""
+    if any(t.perturbation_kind == "position" for t in trials):
+        from estimation.estimator import default_method
+        return default_method(trials)
     if all(t.perturbed_dof is not None for t in trials):
         return "full"
     if all(t.perturbed_dof is None for t in trials):
@@ -65,8 +91,10 @@ def estimate_arm(trials, *, nperseg: int = 8192) -> ArmModel:
         Welch segment [samples] (Table IV: 8192, overlap 3/4).
     """
     # submodules, not the package namespace: robust to what estimation/__init__ exports
-    from estimation.accuracy import fit_second_order, left_limit_delay
+    from estimation.accuracy import fit_impedance, left_limit_delay
+    from estimation.errors import EstimationError
     from estimation.estimator import estimate_impedance
+    from estimation.lab import left_limit_sampled
 
     method = estimator_method(trials)
     shortest = min(t.n_samples for t in trials)
@@ -77,15 +105,29 @@ def estimate_arm(trials, *, nperseg: int = 8192) -> ArmModel:
     except ValueError as exc:
         raise DiagnosisInputError(f"cannot estimate the arm impedance from the trials "
                                   f"{[t.name for t in trials]}: {exc}") from None
-    return _fit(est.f, est.Z, est.fs, method)
+    delay = left_limit_delay(est.fs) if left_limit_sampled(trials) else 0.0
+    leakage = method != "direct"
+    try:
+        fit = fit_impedance(est, inertia_delay_s=delay, leakage=leakage)
+    except EstimationError:
+        leakage = False
+        fit = fit_impedance(est, inertia_delay_s=delay, leakage=False)
+    return _model(fit, est.f, est.Z, est.fs, method, leakage)
 
 
-def _fit(f, Z, fs, method) -> ArmModel:
-    from estimation.accuracy import fit_second_order, left_limit_delay
-    fit = fit_second_order(f, Z, inertia_delay_s=left_limit_delay(fs))
-    return ArmModel(M=np.asarray(fit.M, float), B=np.asarray(fit.B, float),
-                    K=np.asarray(fit.K, float), r2=np.asarray(fit.r2, float), method=method,
-                    f=np.asarray(f), Z=np.asarray(Z), fs=fs)
+def _model(fit, f, Z, fs, method, leakage) -> ArmModel:
+    shape = np.shape(np.atleast_2d(fit.M))
+    as2 = lambda v: np.asarray(v, float).reshape(shape)  # noqa: E731
+    return ArmModel(M=as2(fit.M), B=as2(fit.B), K=as2(fit.K), r2=as2(fit.r2),
+                    method=method, f=np.asarray(f), Z=np.asarray(Z), fs=fs,
+                    inertia_delay_s=float(fit.inertia_delay_s), leakage=leakage,
+                    ci={"M_h": as2(fit.M_ci), "B_h": as2(fit.B_ci), "K_h": as2(fit.K_ci)})
+
+
+def _fit(f, Z, fs, method, inertia_delay_s=0.0) -> ArmModel:
+    from estimation.accuracy import fit_second_order
+    fit = fit_second_order(f, Z, inertia_delay_s=inertia_delay_s)
+    return _model(fit, f, Z, fs, method, False)
 
 
 def link_inertia(meta: dict) -> np.ndarray:
@@ -116,7 +158,8 @@ def arm_behind_transmission(arm: ArmModel, k_t, c_t, m_link) -> ArmModel | None:
     try:
         kci = np.linalg.inv(kc)
         behind = np.linalg.inv(np.linalg.inv(arm.Z[good]) - kci) @ (np.eye(n) + kci @ zl)
-        return _checked(_fit(arm.f[good], behind, arm.fs, arm.method + " behind transmission"))
+        return _checked(_fit(arm.f[good], behind, arm.fs, arm.method + " behind transmission",
+                             arm.sampling_delay))
     except (np.linalg.LinAlgError, ValueError, ArithmeticError):
         return None
 
@@ -152,6 +195,7 @@ def arm_behind_cuff(arm: ArmModel, k_s, c_s) -> ArmModel | None:
     w, good, n = _grid(arm)
     try:
         behind = np.linalg.inv(np.linalg.inv(arm.Z[good]) - np.linalg.inv(_diag(k_s, c_s, w, n)))
-        return _checked(_fit(arm.f[good], behind, arm.fs, arm.method + " behind cuff"))
+        return _checked(_fit(arm.f[good], behind, arm.fs, arm.method + " behind cuff",
+                             arm.sampling_delay))
     except (np.linalg.LinAlgError, ValueError, ArithmeticError):
         return None

@@ -6,6 +6,10 @@ the fit treats it. Each effect is fitted in a one-parameter family per *primary*
 per-joint parameters are one value broadcast to every joint, and secondary parameters
 (dampings, friction shape) are tied to the primary one by the fixed ratios below, which
 the validation's truth models obey as well.
+
+Effects of the position-servo experiments (``kinds`` contains ``"position"``: the limb's
+own effects and the servo's apparatus, diagnosis.limb) are fitted jointly in all their
+primary parameters, with the limb's K, B, I re-estimated alongside, by diagnosis.limbfit.
 """
 
 from __future__ import annotations
@@ -108,6 +112,14 @@ class Effect:
         f(params) -> True when a lab would have had to run the robust tuning.
     sign_choice : bool
         Realistic values lie on both sides of ``off`` (inertia scale).
+    kinds : tuple of str
+        Experiment kinds the effect applies to: ``"exoskeleton"`` (IMBIC with torque
+        perturbations, simulated by the plant FMU) and/or ``"position"`` (a position
+        servo with a torque sensor, simulated by diagnosis.limb and fitted by
+        diagnosis.limbfit).
+    choices : dict
+        Discrete parameters {name: (options...)} (e.g. a reflex rectified or not): drawn
+        uniformly by the validation, chosen by the fit, reported, not in the 20 % target.
     """
 
     name: str
@@ -117,6 +129,8 @@ class Effect:
     robust_above: dict = field(default_factory=dict)
     always_robust: bool = False
     sign_choice: bool = False
+    kinds: tuple = ("exoskeleton",)
+    choices: dict = field(default_factory=dict)
 
     def needs_robust_tuning(self, params: dict) -> bool:
         """True when the closed loop needs the robust tuning (effects.md) for ``params``."""
@@ -141,7 +155,13 @@ class Effect:
                 out[p.name] = float(rng.uniform(lo, hi))
             if self.sign_choice and rng.random() < 0.5:
                 out[p.name] = float(2 * p.off - out[p.name])  # mirror about "off"
+        for key, options in self.choices.items():
+            out[key] = options[int(rng.integers(len(options)))]
         return out
+
+    def applies_to(self, kind: str) -> bool:
+        """True when the effect belongs to experiments of ``kind``."""
+        return kind in self.kinds
 
 
 def _p(*args, **kw) -> Parameter:
@@ -177,8 +197,48 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
                detectable_from=1.07),),
            sign_choice=True),
     Effect("torque_sensor_lag", "first-order low-pass of the torque sensor",
-           (_p("time_constant_s", "s", (5e-4, 4e-3), (5e-5, 2e-2), detectable_from=6e-4),)),
+           (_p("time_constant_s", "s", (5e-4, 4e-3), (5e-5, 2e-2), detectable_from=6e-4),),
+           kinds=("exoskeleton", "position")),
+    # --- the limb's own effects and the position servo's apparatus (diagnosis.limb) ---
+    Effect("stretch_reflex",
+           "delayed velocity pathway through a 2nd-order activation, optionally half-wave "
+           "rectified (parallel-cascade model, Kearney, Stein & Parameswaran 1997)",
+           (_p("gain", "N m s/rad", (1.0, 5.0), (0.02, 60.0)),
+            _p("delay_s", "s", (0.03, 0.06), (0.005, 0.15), log=False, physical_low=True),
+            _p("frequency_hz", "Hz", (2.5, 6.0), (0.5, 30.0))),
+           fit="limbfit", kinds=("position",), choices={"rectified": (False, True)}),
+    Effect("stiffness_amplitude",
+           "stiffness softening with the running RMS amplitude, K (A / 0.01 rad)^-exponent",
+           (_p("exponent", "-", (0.15, 0.5), (0.003, 3.0)),), fit="limbfit",
+           kinds=("position",)),
+    Effect("stiffness_drift", "stiffness drifting over the trial, K (1 + rate t / 60 s)",
+           (_p("rate_per_min", "1/min", (0.1, 0.4), (-3.0, 3.0), log=False),),
+           fit="limbfit", kinds=("position",), sign_choice=True),
+    Effect("wobbling_mass", "soft-tissue inertia on a spring-damper (damping ratio 0.3)",
+           (_p("mass", "kg m^2", (0.004, 0.012), (2e-4, 0.3)),
+            _p("frequency_hz", "Hz", (4.0, 10.0), (1.0, 45.0))),
+           fit="limbfit", kinds=("position",)),
+    Effect("channel_delay", "the torque channel lags (or leads) the angle channel",
+           (_p("delay_s", "s", (0.002, 0.008), (-0.05, 0.05), log=False),),
+           fit="limbfit", kinds=("position",), sign_choice=True),
+    Effect("servo_bandwidth",
+           "the servo tracks theta_ref through a 2nd-order low-pass (damping 0.7); seen "
+           "only when theta_ref is recorded",
+           (_p("bandwidth_hz", "Hz", (8.0, 25.0), (1.0, 250.0)),), fit="limbfit",
+           kinds=("position",)),
 )}
+
+#: experiment kinds of the catalogue
+KINDS = ("exoskeleton", "position")
+
+
+def effects_for(kind: str) -> tuple[str, ...]:
+    """Names of the catalogue effects that apply to experiments of ``kind``.
+
+    Raises DiagnosisInputError for an unknown kind."""
+    if kind not in KINDS:
+        raise DiagnosisInputError(f"unknown experiment kind {kind!r}; known: {', '.join(KINDS)}")
+    return tuple(n for n, e in CATALOGUE.items() if e.applies_to(kind))
 
 
 def get_effect(name: str) -> Effect:
@@ -209,7 +269,7 @@ def expand_effect(name: str, params: dict, n_dof: int = 2) -> dict:
         return {"k_s": per_joint(k), "c_s": per_joint(INTERFACE_DAMPING_TIME_S * k)}
     if name == "delay":
         return {"samples": int(round(params["samples"]))}
-    return {k: float(v) for k, v in params.items()}
+    return {k: (v if isinstance(v, bool) else float(v)) for k, v in params.items()}
 
 
 def below_detectability(name: str, params: dict) -> bool:

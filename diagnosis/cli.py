@@ -16,10 +16,12 @@ def register(subparsers) -> None:
     """Add this package's subcommands to the orchestrator's argparse subparsers."""
     p = subparsers.add_parser("diagnose", help="diagnose the sim-to-real gap of a folder "
                               "of measured trials (report folder: Markdown, JSON, PNG)")
-    p.add_argument("folder", help="folder of trials (NAME.csv + NAME.json)")
+    p.add_argument("folder", help="folder of trials (NAME.csv + NAME.json, NAME.mat, or a "
+                   ".mat of NLID nldat objects), or one such file")
     p.add_argument("--out", required=True, help="report folder")
     p.add_argument("--effects", default=None,
-                   help="comma-separated effects to try (default: all of the catalogue, "
+                   help="comma-separated effects to try (default: every catalogue effect "
+                        "that applies to the trials' experiment, exoskeleton or position: "
                         "docs/diagnosis.md)")
     p.add_argument("--fmu", default=None, help="plant FMU (default: the reference plant)")
     p.add_argument("--workers", type=int, default=None,
@@ -54,7 +56,7 @@ def register(subparsers) -> None:
 def _effects(text):
     from . import catalogue as cat  # numpy: loaded by the handler, not by --help
     if not text:
-        return tuple(cat.CATALOGUE)
+        return tuple(cat.CATALOGUE)  # the experiment keeps those that apply to it
     names = tuple(n.strip() for n in text.split(",") if n.strip())
     for n in names:
         cat.get_effect(n)
@@ -67,11 +69,20 @@ def _diagnose(args) -> int:
     report = diagnose(args.folder, args.out, config=config, plant=args.fmu,
                       progress=not args.quiet, workers=args.workers,
                       scheduler=args.scheduler, rk4_step=args.rk4_step)
-    named = " + ".join(report.named)
-    print(f"verdict: {report.verdict}{': ' + named if named else ''}")
-    print(report.summary)
-    print(f"nominal gap {report.gap['nominal_all']:.3g} (threshold "
-          f"{report.gap['significance_threshold']:.3g}); report: {Path(args.out) / 'report.md'}")
+    reports = getattr(report, "reports", None) or {None: report}
+    for condition, one in reports.items():
+        named = " + ".join(one.named)
+        head = "" if condition is None else f"[{condition}] "
+        print(f"{head}verdict: {one.verdict}{': ' + named if named else ''}")
+        print(one.summary)
+        fm = one.gap.get("fit_measure")
+        if fm:  # an experiment with its own fit measure (position servo: limbfit)
+            print(f"{head}nominal gap {fm['g0_all']:.3g} (threshold {fm['threshold']:.3g}, "
+                  f"{fm['measure'].split(':')[0]}); feature gap {one.gap['nominal_all']:.3g}")
+        else:
+            print(f"{head}nominal gap {one.gap['nominal_all']:.3g} (threshold "
+                  f"{one.gap['significance_threshold']:.3g})")
+    print(f"report: {Path(args.out) / 'report.md'}")
     return 0
 
 

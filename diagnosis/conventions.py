@@ -74,7 +74,7 @@ def _replace(trial, scale=None, offset=None, **arrays):
     """A corrected copy; its storage context is the raw trial's, seen through the
     correction corrected = raw * scale - offset (per signal), so that simulations are
     still stored as the raw numbers were."""
-    from .core import storage_context
+    from .evaluation import storage_context
     raw = storage_context(trial)
     out = dataclasses.replace(trial, **arrays)
     out._storage_context = raw.converted(scale or {}, offset or {})
@@ -100,7 +100,9 @@ def apply_declared(trials) -> tuple[list, list]:
 def check_angles(trials) -> tuple[list, list]:
     """Absolute angles and angles in degrees (see module docstring)."""
     findings = []
-    posture = np.radians(np.asarray(trials[0].meta["posture_deg"], dtype=float))
+    # a set-up without a declared posture (a position servo's) has deviations only
+    posture = np.radians(np.asarray(trials[0].meta.get("posture_deg")
+                                    or [0.0] * trials[0].n_dof, dtype=float))
     theta = np.vstack([t.theta for t in trials])
     mean = theta.mean(axis=0)
     spread = np.max(np.abs(theta - mean), axis=0)

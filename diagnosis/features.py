@@ -119,8 +119,8 @@ class FeatureVector:
             self.var_storage = np.zeros_like(self.values)
 
 
-#: columns whose storage is read and re-applied
-STORED_SIGNALS = ("tau_delta",) + SIGNALS
+#: columns whose storage is read and re-applied (those a trial carries)
+STORED_SIGNALS = ("tau_delta",) + SIGNALS + ("theta_ref",)
 #: the rounding-noise model (step^2 / 12, white) is taken as known to within this fraction
 ROUNDING_MODEL_TOLERANCE = 0.5
 
@@ -151,6 +151,8 @@ class StorageContext:
     def from_trial(cls, trial) -> "StorageContext":
         storage, var, res = {}, {}, {}
         for s in STORED_SIGNALS:
+            if getattr(trial, s, None) is None:
+                continue
             x = np.asarray(trial.signal(s), dtype=float)
             cols = [detect_storage(x[:, j]) for j in range(x.shape[1])]
             storage[s] = tuple(cols)
@@ -166,6 +168,8 @@ class StorageContext:
             return trial
         changes = {}
         for s in SIGNALS:
+            if getattr(trial, s, None) is None or s not in self.storage:
+                continue
             x = np.asarray(trial.signal(s), dtype=float)
             scale, offset = self.transforms.get(s, (1.0, 0.0))
             raw = (x + offset) / scale
@@ -202,8 +206,9 @@ class StorageContext:
 
 
 def trial_features(trial, config: FeatureConfig = FeatureConfig(), *, start: int = 0,
-                   stop: int | None = None,
-                   context: StorageContext | None = None) -> FeatureVector:
+                   stop: int | None = None, context: StorageContext | None = None,
+                   perturbation: str = "tau_delta", signals: tuple = SIGNALS,
+                   kinds: tuple = ("frf", "noise", "static", "grid")) -> FeatureVector:
     """Features of ``trial`` over the samples ``start:stop``.
 
     Parameters
@@ -216,19 +221,30 @@ def trial_features(trial, config: FeatureConfig = FeatureConfig(), *, start: int
         The *measured* trial's storage: adds the rounding variance of every feature and
         fixes the smallest resolvable grid (pass the same context for a simulation of
         it, after ``context.store(sim)``). Default: exact numbers.
+    perturbation : str
+        The known input the FRFs are taken from (the experiment's: ``tau_delta``, or
+        ``theta_ref`` / ``theta`` for a position servo).
+    signals : tuple of str
+        The signals compared (the experiment's outputs).
+    kinds : tuple of str
+        Feature kinds computed (``static`` needs ``tau_m``, ``grid`` theta or tau_h).
     """
     sl = slice(start, stop)
     fs = trial.fs
-    data = {s: np.asarray(trial.signal(s))[sl] for s in ("tau_delta",) + SIGNALS}
-    n = data["theta"].shape[1]
+    data = {s: np.asarray(trial.signal(s))[sl] for s in dict.fromkeys((perturbation,) + signals)}
+    n = trial.n_dof
     inputs = [trial.perturbed_dof] if trial.perturbed_dof is not None else list(range(1, n + 1))
     rows = []  # (label, value, var_stat, batch values, storage variance)
     spectra = _Spectra(data, fs, config)
     for k in inputs:
         tag = f"_in{k}" if len(inputs) > 1 else ""
-        rows += _spectral_rows(data, k, n, fs, config, tag, context, spectra)
-    rows += _static_rows(data, inputs, n, fs, config, context)
-    rows += _grid_rows(data, n, config, context)
+        rows += _spectral_rows(data, k, n, fs, config, tag, context, spectra,
+                               perturbation=perturbation, signals=signals, kinds=kinds)
+    if "static" in kinds and "tau_m" in signals and "theta" in data:
+        rows += _static_rows(data, inputs, n, fs, config, context)
+    if "grid" in kinds:
+        rows += _grid_rows(data, n, config, context,
+                           signals=tuple(s for s in ("theta", "tau_h") if s in signals))
     n_b = config.n_batches
     batches = np.array([r[3] if r[3] is not None else np.full(n_b, np.nan) for r in rows]).T
     return FeatureVector(labels=[r[0] for r in rows],
@@ -283,16 +299,19 @@ class _Spectra:
         return self.cross(a, a).real
 
 
-def _spectral_rows(data, k, n, fs, cfg, tag, context=None, spectra=None):
+def _spectral_rows(data, k, n, fs, cfg, tag, context=None, spectra=None, *,
+                   perturbation="tau_delta", signals=SIGNALS, kinds=("frf", "noise")):
     spectra = spectra or _Spectra(data, fs, cfg)
-    x = data["tau_delta"][:, k - 1]
-    sx = _rounding_psd(context, "tau_delta", k, fs)
-    f, pxx = spectra.f, spectra.auto(("tau_delta", k))
+    x = data[perturbation][:, k - 1]
+    sx = _rounding_psd(context, perturbation, k, fs)
+    f, pxx = spectra.f, spectra.auto((perturbation, k))
     n_seg = 1 + (x.shape[0] - cfg.nperseg) // (cfg.nperseg - cfg.noverlap)
     rows = []
-    for s in SIGNALS:
+    for s in signals:
         for i in range(1, n + 1):
-            pxy = spectra.cross(("tau_delta", k), (s, i))
+            if s == perturbation and i == k:
+                continue  # the input's FRF to itself is 1
+            pxy = spectra.cross((perturbation, k), (s, i))
             pyy = np.maximum(spectra.auto((s, i)), np.finfo(float).tiny)
             h = pxy / pxx
             coh = np.clip(np.abs(pxy) ** 2 / (pxx * pyy), 1e-6, 1.0)
@@ -302,7 +321,7 @@ def _spectral_rows(data, k, n, fs, cfg, tag, context=None, spectra=None):
             sy = _rounding_psd(context, s, i, fs)
             gain = np.maximum(np.abs(pxy) ** 2 / pxx, np.finfo(float).tiny)
             var_q = (sy / gain + sx / pxx) / (2.0 * n_seg)
-            for band in cfg.coherent_bands:
+            for band in (cfg.coherent_bands if "frf" in kinds else ()):
                 sel = (f >= band[0]) & (f <= band[1])
                 m_eff = max(1.0, sel.sum() / 1.5)  # Hann: neighbouring bins correlate
                 var = float(np.mean(var_bin[sel]) / m_eff)
@@ -316,7 +335,7 @@ def _spectral_rows(data, k, n, fs, cfg, tag, context=None, spectra=None):
                 rows.append((("frf", s, i, lab, f"logmag{tag}"), logmag, var, None, vq))
                 rows.append((("frf", s, i, lab, f"phase{tag}"), phase, var, None, vq))
             p_inc = pyy * (1.0 - coh)
-            for band in cfg.noise_bands:
+            for band in (cfg.noise_bands if "noise" in kinds else ()):
                 sel = (f >= band[0]) & (f <= band[1])
                 m_eff = max(1.0, sel.sum() / 1.5)
                 level = np.mean(p_inc[sel]) + cfg.noise_psd_floor[s]
@@ -380,9 +399,9 @@ def grid_step(x: np.ndarray, storage: Storage | None = None) -> float:
     return find_grid(x, storage).step
 
 
-def _grid_rows(data, n, cfg, context=None):
+def _grid_rows(data, n, cfg, context=None, signals=("theta", "tau_h")):
     rows = []
-    for s in ("theta", "tau_h"):
+    for s in signals:
         for j in range(1, n + 1):
             x = data[s][:, j - 1]
             if context is None:

@@ -1,6 +1,7 @@
 """Reading the measured trials of a diagnosis, blind to any truth.
 
-Only ``NAME.csv`` with its ``NAME.json`` (or ``NAME.mat``, trialformat.matlab) are read;
+Only ``NAME.csv`` with its ``NAME.json`` (or ``NAME.mat``, trialformat.matlab; or a
+``.mat`` of NLID ``nldat`` objects, diagnosis.nldat) are read;
 files whose stem ends in ``.truth`` are never opened, and the ``simulation`` key a simulator may leave in the metadata is
 dropped on reading, so no code after this point can see what was really simulated.
 """
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -17,18 +19,24 @@ import trialformat as tf
 
 from .errors import DiagnosisInputError
 
-#: metadata keys that every trial of one diagnosis must declare identically
+#: metadata keys that every trial of one diagnosis must declare identically (torque
+#: perturbation: the exoskeleton's set-up; position: only the rate and the joints)
 DECLARED_KEYS = ("fs", "n_dof", "posture_deg", "controller", "sensors", "robot", "friction")
+POSITION_DECLARED_KEYS = ("fs", "n_dof")
 HIDDEN_KEYS = ("simulation",)
 
 
 def trial_paths(source) -> list[Path]:
     """The ``NAME.csv`` / ``NAME.mat`` paths of a folder (or a list of paths), truth
     files excluded."""
-    if isinstance(source, (str, os.PathLike)):
+    if isinstance(source, (str, os.PathLike)) and Path(source).is_file() and \
+            str(source).lower().endswith((".csv", ".csv.gz", ".mat")):
+        paths = [Path(source)]
+    elif isinstance(source, (str, os.PathLike)):
         folder = Path(source)
         if not folder.is_dir():
-            raise DiagnosisInputError(f"{folder}: not a folder of trials")
+            raise DiagnosisInputError(f"{folder}: not a folder of trials (nor a NAME.csv "
+                                      f"or NAME.mat file)")
         try:
             paths = tf.logs.folder_trials(folder)  # .csv, .csv.gz, .mat; dotted names kept
         except tf.TrialFormatError as exc:
@@ -42,8 +50,12 @@ def trial_paths(source) -> list[Path]:
     return paths
 
 
-def load_trials(source, *, min_samples: int = tf.MIN_SAMPLES) -> list[tf.Trial]:
-    """Read the measured trials and check that they declare one set-up.
+def load_trials(source, *, min_samples: int = tf.MIN_SAMPLES,
+                check: bool = True) -> list[tf.Trial]:
+    """Read the measured trials and (``check``) that they declare one set-up.
+
+    A ``.mat`` holding NLID ``nldat`` objects (no ``meta``) gives one trial per object
+    (diagnosis.nldat).
 
     Raises
     ------
@@ -53,27 +65,67 @@ def load_trials(source, *, min_samples: int = tf.MIN_SAMPLES) -> list[tf.Trial]:
     """
     from estimation.io import read_trial
     trials = []
+    read = []
     for path in trial_paths(source):
         try:
-            trial = read_trial(path, min_samples=min_samples)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                read.append(read_trial(path, min_samples=min_samples))
+            for w in caught:  # a file read whole: its warnings are the user's to see
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         except (tf.TrialFormatError, ValueError) as exc:
-            raise DiagnosisInputError(str(exc)) from None
+            from .nldat import read_nldat_trials
+            found = read_nldat_trials(path, min_samples=min_samples) \
+                if Path(path).suffix.lower() == ".mat" else None
+            if not found:
+                raise DiagnosisInputError(str(exc)) from None
+            read.extend(found)
+    for trial in read:
         for key in HIDDEN_KEYS:
             trial.meta.pop(key, None)
         # float32 storage (a .mat) is a representation, not a working precision
-        for s in tf.SIGNALS:
-            setattr(trial, s, np.asarray(trial.signal(s), dtype=float))
+        for s in tf.SIGNALS + ("theta_ref",):
+            if getattr(trial, s, None) is not None:
+                setattr(trial, s, np.asarray(trial.signal(s), dtype=float))
         trial.t = np.asarray(trial.t, dtype=float)
         trials.append(trial)
-    check_consistent(trials)
+    names = [t.name for t in trials]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise DiagnosisInputError(f"{source}: trial name(s) {dup} given twice")
+    if check:
+        check_consistent(trials)
     return trials
 
 
+def split_conditions(trials) -> dict:
+    """Trials grouped by their ``condition`` label (None: one group), each group checked
+    to declare one set-up (:func:`check_consistent`); in the order first met."""
+    groups: dict = {}
+    for t in trials:
+        groups.setdefault(t.meta.get("condition"), []).append(t)
+    if len(groups) > 1 and None in groups:
+        raise DiagnosisInputError(
+            f"trials {[t.name for t in groups[None]]} have no 'condition' label while "
+            f"others have one ({sorted(str(k) for k in groups if k is not None)}): label "
+            f"every trial or none")
+    for group in groups.values():
+        check_consistent(group)
+    return groups
+
+
 def check_consistent(trials) -> None:
-    """Refuse trials whose declared set-ups (DECLARED_KEYS) differ."""
+    """Refuse trials whose declared set-ups (DECLARED_KEYS; POSITION_DECLARED_KEYS for
+    position perturbations) or perturbation kinds differ."""
     first = trials[0]
+    keys = POSITION_DECLARED_KEYS if first.perturbation_kind == "position" else DECLARED_KEYS
     for trial in trials[1:]:
-        for key in DECLARED_KEYS:
+        if trial.perturbation_kind != first.perturbation_kind:
+            raise DiagnosisInputError(
+                f"trial {trial.name!r} is a {trial.perturbation_kind} perturbation but trial "
+                f"{first.name!r} a {first.perturbation_kind} one: one diagnosis takes "
+                f"trials of one experiment")
+        for key in keys:
             a, b = first.meta.get(key), trial.meta.get(key)
             if json.dumps(a, sort_keys=True) != json.dumps(b, sort_keys=True):
                 raise DiagnosisInputError(

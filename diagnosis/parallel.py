@@ -90,8 +90,11 @@ class Runner:
             return f"dask {getattr(self._client, 'scheduler_info', lambda: {})().get('address', '')}"
         return f"{self.workers} local process{'es' if self.workers > 1 else ''}"
 
-    def map(self, fn, arg_tuples, *, desc: str = "") -> list:
-        """``[fn(state, *args) for args in arg_tuples]``, run on the workers, in order."""
+    def map(self, fn, arg_tuples, *, desc: str = "", done=None) -> list:
+        """``[fn(state, *args) for args in arg_tuples]``, run on the workers, in order.
+
+        ``done(i, result)``, when given, is called as each task finishes (e.g. to store
+        it for a resumed run)."""
         arg_tuples = list(arg_tuples)
         t0 = time.perf_counter()
         bar = tqdm(total=len(arg_tuples), desc=desc, disable=not self.progress, unit="task")
@@ -103,16 +106,22 @@ class Runner:
                            for i, args in enumerate(arg_tuples)}
                 for fut in dask_completed(list(futures)):
                     results[futures[fut]] = fut.result()
+                    if done is not None:
+                        done(futures[fut], results[futures[fut]])
                     bar.update()
             elif self._pool is not None:
                 futures = {self._pool.submit(_call, fn, None, args): i
                            for i, args in enumerate(arg_tuples)}
                 for fut in as_completed(futures):
                     results[futures[fut]] = fut.result()
+                    if done is not None:
+                        done(futures[fut], results[futures[fut]])
                     bar.update()
             else:
                 for i, args in enumerate(arg_tuples):
                     results[i] = fn(self.state, *args)
+                    if done is not None:
+                        done(i, results[i])
                     bar.update()
         finally:
             bar.close()

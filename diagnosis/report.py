@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import matplotlib
@@ -15,6 +16,47 @@ import numpy as np  # noqa: E402
 from scipy import signal as sps  # noqa: E402
 
 from .features import SIGNALS  # noqa: E402
+
+@dataclass
+class DiagnosisReport:
+    """Result of :func:`diagnose`; ``to_dict()`` is the report's JSON (docs/diagnosis.md)."""
+
+    verdict: str
+    named: list
+    summary: str
+    amplitude: dict
+    conventions: list
+    numerics: list
+    timing: dict
+    fitted: dict
+    ranking: list
+    pairs: list
+    gap: dict
+    where: dict
+    arm: dict
+    split: dict
+    config: dict
+    n_simulations: int
+    elapsed_s: float
+    trials: list
+    experiment: dict = field(default_factory=dict)
+    intervals: dict = field(default_factory=dict)
+    out_dir: object = None
+    extras: dict = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> dict:
+        return {"format": "arm-impedance-diagnosis/1", "verdict": self.verdict,
+                "summary": self.summary, "named_effects": self.named,
+                "fitted_parameters": self.fitted, "fitted_intervals_95": self.intervals,
+                "amplitude_dependence": self.amplitude,
+                "conventions": self.conventions, "numerical_retries": self.numerics,
+                "timing": self.timing,
+                "ranking": self.ranking, "pairs": self.pairs, "gap": self.gap,
+                "where": self.where, "arm": self.arm, "split": self.split,
+                "trials": self.trials, "experiment": self.experiment,
+                "n_simulations": self.n_simulations,
+                "elapsed_s": self.elapsed_s, "config": self.config}
+
 
 FIGURES = {"where": "gap_where.png", "ranking": "gap_ranking.png",
            "frf": "frf_compare.png", "noise": "noise_spectra.png"}
@@ -34,10 +76,18 @@ def write_report(report, out_dir) -> Path:
 
 
 def _atomic_text(path: Path, text: str) -> None:
+    """Write through a temporary file and rename; the file gets the user's umask."""
+    from trialformat.logs import current_umask
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.chmod(tmp, 0o666 & ~current_umask())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
 
 
 def _clean(obj):
@@ -72,13 +122,23 @@ def _params(p: dict) -> str:
 def markdown(report) -> str:
     """The report page (Markdown)."""
     g = report.gap
+    exp = report.experiment or {}
     lines = [f"# Sim-to-real gap diagnosis", "",
              f"Trials: {', '.join(report.trials)}", "",
+             f"Experiment: {exp.get('class', '-')} ({exp.get('title', '-')})"
+             + (f"; effects not applicable to it: {', '.join(exp['effects_not_applicable'])}"
+                if exp.get("effects_not_applicable") else "") + ".", "",
              f"## Verdict: **{report.verdict}**"
              + (f" — {' + '.join(report.named)}" if report.named else ""), "",
              report.summary, ""]
     if report.named:
-        lines += [f"Fitted: {_params(report.fitted)}", "",
+        lines += [f"Fitted: {_params(report.fitted)}", ""]
+        if report.intervals:
+            lines += ["95 % intervals: " + "; ".join(
+                f"{e}: " + ", ".join(f"{k} [{_fmt(v[0], 4)}, {_fmt(v[1], 4)}]"
+                                     for k, v in d.items())
+                for e, d in report.intervals.items() if d), ""]
+        lines += [
                   f"Held-out gap {_fmt(g['nominal_held_out'])} -> {_fmt(g['named_held_out'])} "
                   f"(reduction {_fmt(100 * g['named_held_out_reduction'], 3)} %); "
                   f"all data {_fmt(g['nominal_all'])} -> {_fmt(g['named_all'])}.", ""]
@@ -130,7 +190,14 @@ def markdown(report) -> str:
               f"fit, weighted R^2 {np.round(report.arm['r2'], 3).tolist()}): "
               f"M_h={np.round(report.arm['M_h'], 4).tolist()}, "
               f"B_h={np.round(report.arm['B_h'], 4).tolist()}, "
-              f"K_h={np.round(report.arm['K_h'], 3).tolist()}.", "",
+              f"K_h={np.round(report.arm['K_h'], 3).tolist()}"
+              + (f" (95 % intervals +- M {np.round(report.arm['ci95']['M_h'], 4).tolist()}, "
+                 f"B {np.round(report.arm['ci95']['B_h'], 4).tolist()}, "
+                 f"K {np.round(report.arm['ci95']['K_h'], 3).tolist()})"
+                 if report.arm.get("ci95") else "")
+              + "; sampling and leakage: "
+              + (", ".join(f"{k}={v}" for k, v in report.arm.get("corrections", {}).items())
+                 or "-") + ".", "",
               f"Split rule: {report.split['rule']}; calibration "
               + ", ".join(f"{u['trial']}[{u['start']}:{u['stop']}]"
                           for u in report.split["calibration"])
@@ -205,25 +272,33 @@ def _plot_ranking(report, path: Path) -> None:
 
 
 def _plot_signals(report, frf_path: Path, noise_path: Path) -> None:
+    """Bode plot (|H| and phase) from the experiment's perturbation to each compared
+    signal, measured / nominal / named model, and the signals' spectra."""
     trials = report.extras["trials"]
     ev = report.extras["ev_all"]
     chosen = report.extras.get("chosen")
+    experiment = report.extras["experiment"]
     trial = trials[0]
     k = trial.perturbed_dof or 1
-    from .core import Unit
+    from .evaluation import Unit
     unit = Unit(trial, 0, trial.n_samples, "all")
+    source = experiment.perturbation_signal(trial)
+    signals = [s for s in experiment.output_signals(trial) if s != source]
     runs = [("measured", trial), ("nominal", ev.simulation(unit, {}))]
     if chosen is not None:
+        ev_named = report.extras.get("ev_named") or ev
         runs.append(("with " + " + ".join(chosen.effects),
-                     ev.simulation(unit, chosen.simulation_effects(trial.n_dof))))
+                     ev_named.simulation(unit, chosen.simulation_effects(trial.n_dof))))
     nper = ev.cfg.features.nperseg
-    fig, axes = plt.subplots(2, 3, figsize=(12, 6), sharex=True)
-    fig2, axes2 = plt.subplots(1, 3, figsize=(12, 3.5))
-    for col, s in enumerate(SIGNALS):
+    cols = len(signals)
+    fig, axes = plt.subplots(2, cols, figsize=(4 * cols + 1, 6), sharex=True, squeeze=False)
+    fig2, axes2 = plt.subplots(1, cols, figsize=(4 * cols + 1, 3.5), squeeze=False)
+    axes2 = axes2[0]
+    for col, s in enumerate(signals):
         for label, run in runs:
             if run is None:
                 continue
-            x, y = run.tau_delta[:, k - 1], run.signal(s)[:, k - 1]
+            x, y = run.signal(source)[:, k - 1], run.signal(s)[:, k - 1]
             f, pxy = sps.csd(x, y, fs=run.fs, nperseg=nper)
             _, pxx = sps.welch(x, fs=run.fs, nperseg=nper)
             _, pyy = sps.welch(y, fs=run.fs, nperseg=nper)
@@ -232,7 +307,7 @@ def _plot_signals(report, frf_path: Path, noise_path: Path) -> None:
             axes[0, col].loglog(f[band], np.abs(h), label=label)
             axes[1, col].semilogx(f[band], np.degrees(np.angle(h)), label=label)
             axes2[col].loglog(f[1:], pyy[1:], label=label, lw=0.8)
-        axes[0, col].set_title(f"tau_delta[{k}] -> {s}[{k}]")
+        axes[0, col].set_title(f"{source}[{k}] -> {s}[{k}]")
         axes[1, col].set_xlabel("frequency [Hz]")
         axes2[col].set_title(f"spectrum of {s}[{k}] [{UNITS[s]}^2/Hz]")
         axes2[col].set_xlabel("frequency [Hz]")
@@ -245,3 +320,29 @@ def _plot_signals(report, frf_path: Path, noise_path: Path) -> None:
     fig2.savefig(noise_path, dpi=100, bbox_inches="tight")
     plt.close(fig)
     plt.close(fig2)
+
+
+def write_set_index(result, out_dir) -> Path:
+    """The index of a diagnosis over several conditions: ``report.md`` and
+    ``report.json`` beside one report folder per condition."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = ["# Sim-to-real gap diagnosis, one report per condition", "",
+             "| condition | verdict | named | fitted | held-out reduction | nominal gap |",
+             "|---|---|---|---|---|---|"]
+    for c, r in result.reports.items():
+        red = r.gap.get("named_held_out_reduction")
+        folder = r.out_dir.name if r.out_dir is not None else c
+        lines.append(f"| [{c}]({folder}/report.md) | {r.verdict} | {' + '.join(r.named) or '-'} | "
+                     f"{_params(r.fitted) or '-'} | "
+                     f"{'-' if red is None else _fmt(100 * red) + ' %'} | "
+                     f"{_fmt(r.gap['nominal_all'])} |")
+    lines += [""] + [f"- **{c}**: {r.summary}" for c, r in result.reports.items()] + [""]
+    _atomic_text(out / "report.json", json.dumps(_clean(
+        {"format": "arm-impedance-diagnosis-set/1",
+         "conditions": {c: {"report": f"{r.out_dir.name if r.out_dir else c}/report.json",
+                            "verdict": r.verdict, "named_effects": r.named,
+                            "fitted_parameters": r.fitted, "gap": r.gap}
+                        for c, r in result.reports.items()}}), indent=2))
+    _atomic_text(out / "report.md", "\n".join(lines))
+    return out / "report.md"

@@ -67,14 +67,16 @@ def write_represented(stem, trial: tf.Trial, rep: str) -> Path:
         raise ValueError(f"unknown representation {rep!r}; known: {', '.join(REPRESENTATIONS)}")
     if rep == "float32_mat":
         return _write_mat32(stem, trial)
-    data = [np.asarray(trial.signal(s), dtype=float) for s in tf.SIGNALS]
+    signals = trial.signals()  # a position trial carries fewer (log-format.md)
+    data = [np.asarray(trial.signal(s), dtype=float) for s in signals]
     if rep == "float32_csv":
         data = [d.astype(np.float32).astype(float) for d in data]
     table = np.hstack([trial.t[:, None]] + data)
     fmt = _column_format(rep)
     row = ",".join(["%.17g"] + [fmt] * (table.shape[1] - 1)) + "\n"
     body = (row * table.shape[0]) % tuple(table.ravel().tolist())
-    header = ",".join(tf.column_names(trial.n_dof)) + "\n"
+    header = ",".join(["t"] + [f"{s}[{j}]" for s in signals
+                               for j in range(1, trial.n_dof + 1)]) + "\n"
     meta = copy.deepcopy(trial.meta)
     meta.setdefault("format", tf.FORMAT)
     _atomic(tf.logs.with_ending(stem, ".json"), json.dumps(meta, indent=2).encode())
@@ -87,7 +89,7 @@ def _write_mat32(stem: Path, trial: tf.Trial) -> Path:
     path = tf.logs.with_ending(stem, ".mat")
     data = {"t": np.asarray(trial.t, dtype=float)[:, None],
             "meta": json.dumps(trial.meta)}
-    data.update({s: np.asarray(trial.signal(s)).astype(np.float32) for s in tf.SIGNALS})
+    data.update({s: np.asarray(trial.signal(s)).astype(np.float32) for s in trial.signals()})
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp.mat")
     os.close(fd)
     try:

@@ -83,24 +83,27 @@ class SetSpec:
                 **({"outside_catalogue": self.extra} if self.extra else {})}
 
 
-#: effects outside the catalogue. Physically different from every catalogue effect: a
-#: nonlinearity of the limb (stiffness growing with stretch), a dynamic element (a
-#: wobbling soft-tissue mass), a neural one (a delayed stretch reflex) -- active torques of
-#: the limb (outside.py), each at two perturbation levels so that an amplitude dependence
-#: can show -- and plant parameters the catalogue does not touch: a heavier
+#: effects outside the catalogue. Physically different from every catalogue effect: two
+#: nonlinearities of the limb (stiffness growing with stretch; viscosity growing with
+#: speed), an active torque the perturbation does not cause (physiological tremor) --
+#: torques of the limb (outside.py), each at two perturbation levels so that an amplitude
+#: dependence can show -- and plant parameters the catalogue does not touch: a heavier
 #: motor/transmission inertia Jm (inertia_mismatch scales a1..a3, not Jm) and a heavier
-#: second link (changes a2, a3 but not a1 alike). ``draw`` gives the magnitudes.
+#: second link (changes a2, a3 but not a1 alike). ``draw`` gives the magnitudes. (The
+#: stretch reflex and the wobbling mass of the earlier list joined the catalogue, for
+#: position experiments: diagnosis.limb, diagnosis.position_validation.)
 OUTSIDE = (
     {"name": "cubic_stiffness", "levels": (1, 3),
      "draw": lambda rng: {"human": {"model": "cubic_stiffness",
                                     "params": {"k3": _log_uniform(rng, 1500.0, 4000.0)}}}},
-    {"name": "wobbling_mass", "levels": (1, 3),
-     "draw": lambda rng: {"human": {"model": "wobbling_mass",
-                                    "params": _wobbling(rng)}}},
-    {"name": "stretch_reflex", "levels": (1, 3),
-     "draw": lambda rng: {"human": {"model": "stretch_reflex",
-                                    "params": {"gain": _log_uniform(rng, 0.3, 0.8),
-                                               "delay_s": float(rng.uniform(0.025, 0.05))}}}},
+    {"name": "quadratic_damping", "levels": (1, 3),
+     "draw": lambda rng: {"human": {"model": "quadratic_damping",
+                                    "params": {"b2": _log_uniform(rng, 0.5, 2.0)}}}},
+    {"name": "tremor", "levels": (1, 3),
+     "draw": lambda rng: {"human": {"model": "tremor",
+                                    "params": {"rms_nm": _log_uniform(rng, 0.05, 0.15),
+                                               "frequency_hz": float(rng.uniform(8.0, 12.0)),
+                                               "seed": int(rng.integers(1, 10_000))}}}},
     {"name": "motor_inertia", "levels": (),
      "draw": lambda rng: {"parameters": {"robot.Jm[1]": 0.016, "robot.Jm[2]": 0.016}}},
     {"name": "link2_mass", "levels": (),
@@ -110,13 +113,6 @@ OUTSIDE = (
 
 def _log_uniform(rng, lo, hi) -> float:
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
-
-
-def _wobbling(rng) -> dict:
-    """Wobbling mass 0.02-0.05 kg m^2 resonating at 4-8 Hz, damping ratio 0.3."""
-    m = _log_uniform(rng, 0.02, 0.05)
-    k = m * (2 * math.pi * float(rng.uniform(4.0, 8.0))) ** 2
-    return {"m": m, "k": k, "c": 2 * 0.3 * math.sqrt(k * m)}
 
 
 def draw_specs(rng: np.random.Generator, *, n_per_effect: int = 1, n_nominal: int = 2,
@@ -134,7 +130,8 @@ def draw_specs(rng: np.random.Generator, *, n_per_effect: int = 1, n_nominal: in
         return str(reps[int(rng.integers(len(reps)))])
 
     specs = []
-    for name, effect in cat.CATALOGUE.items():
+    for name in cat.effects_for("exoskeleton"):
+        effect = cat.get_effect(name)
         for i in range(n_per_effect):
             specs.append(SetSpec(f"{name}-{i}", ((name, effect.draw(rng)),),
                                  seeds=(int(rng.integers(1, 10_000)),),
@@ -150,7 +147,7 @@ def draw_specs(rng: np.random.Generator, *, n_per_effect: int = 1, n_nominal: in
                              seeds=(int(rng.integers(1, 10_000)),),
                              extra={"name": out["name"], **out["draw"](rng)},
                              levels=out["levels"], representation=rep(), **common))
-    names = list(cat.CATALOGUE)
+    names = list(cat.effects_for("exoskeleton"))
     for i in range(n_pairs):
         a, b = pairs[i % len(pairs)] if pairs else rng.choice(names, 2, replace=False)
         specs.append(SetSpec(f"pair-{a}+{b}-{i}", ((a, cat.get_effect(a).draw(rng)),
@@ -247,14 +244,14 @@ def nominal_gap(folder, *, config: DiagnosisConfig = DiagnosisConfig(), plant=No
         ``value`` is the (clipped) gap, ``excess`` the unclipped mean(z^2) - expected;
         None when the nominal model diverges.
     """
-    from .arm import estimate_arm
-    from .core import Evaluator, Unit
+    from .evaluation import Evaluator, Unit
+    from .experiments import experiment_for
     from .inputs import load_trials
-    from .simulate import nominal_setup
     trials = load_trials(folder)
-    setup = nominal_setup(trials[0].meta, estimate_arm(trials))
+    experiment = experiment_for(trials)
+    simulate = experiment.simulator(experiment.estimate(trials), plant=plant)
     units = [Unit(t, 0, t.n_samples, "all") for t in trials]
-    return Evaluator(setup, units, config, plant).gap({})
+    return Evaluator(experiment, simulate, units, config).gap({})
 
 
 def read_truth(folder) -> dict:

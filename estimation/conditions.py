@@ -116,7 +116,9 @@ def condition_of(trial) -> Condition:
         np.isclose(sens[k], ref.sensor_level(lvl)[k]) for k in sens
         if k in ref.sensor_level(lvl))), "custom")
     pert = meta.get("perturbation", {}).get("level", "custom")
-    tuning = meta["controller"].get("tuning") or _tuning_from_gains(meta["controller"])
+    ctrl = meta.get("controller") or {}  # a set-up without a controller block (one joint)
+    tuning = ctrl.get("tuning") or (_tuning_from_gains(ctrl) if {"Mbar", "wn"} <= set(ctrl)
+                                    else "custom")
     return Condition(friction, resolution, pert, tuning)
 
 

@@ -124,9 +124,33 @@ class Trial:
         return tuple(names + (["theta_ref"] if self.theta_ref is not None else []))
 
 
+#: numbers of joints whose reference set-up (robot, controller, posture) fills absent keys
+REFERENCE_JOINTS = (2, 3)
+
+
 def default_metadata(n_dof: int = 2) -> dict:
-    """Metadata of the reference set-up (friction level 0, ideal sensors)."""
+    """Metadata of the reference set-up (friction level 0, ideal sensors).
+
+    For a number of joints with no reference set-up (``REFERENCE_JOINTS``; e.g. one
+    joint) nothing is borrowed from the two-joint reference: ``posture_deg``, ``robot``
+    and ``controller`` are absent (a consumer that needs them refuses, naming the key),
+    and the documented defaults are fs = 1000 Hz, ideal sensors (level 0), no friction
+    (Fc = Fs = sigma2 = 0 per joint) and a torque perturbation without level or peak
+    (log-format.md).
+    """
     r = ref.reference()
+    if n_dof not in REFERENCE_JOINTS:
+        fric = ref.friction_level(0, 2)
+        return {
+            "format": FORMAT, "fs": 1.0 / r["timing"]["control_period_s"], "n_dof": n_dof,
+            "perturbed_dof": 1 if n_dof == 1 else None,
+            "perturbation": {"seed": 0, "cutoff_hz": r["perturbation"]["cutoff_hz"],
+                             "order": r["perturbation"]["butterworth_order"]},
+            "sensors": ref.sensor_level(0),
+            "friction": {**{k: [0.0] * n_dof for k in ("Fc", "Fs", "sigma2")},
+                         **{k: fric[k] for k in ("sigma0", "sigma1", "ws")}},
+            "source": "",
+        }
     return {
         "format": FORMAT,
         "fs": 1.0 / r["timing"]["control_period_s"],

@@ -198,7 +198,7 @@ def test_v73_meta_with_python_lists_reads_like_scipy_v5(tmp_path):
     from scipy import io as sio
     meta = tf.default_metadata(1)
     meta.update(perturbed_dof=1, posture_deg=[10.0], condition="slow")
-    meta["controller"]["K_rd"] = [10.0]
+    meta.setdefault("controller", {})["K_rd"] = [10.0]  # one joint: no reference block
     data = _mat_arrays()
     sio.savemat(tmp_path / "v5.mat", {**data, "meta": meta})
     hdf5storage.savemat(str(tmp_path / "v73.mat"), {**data, "meta": meta}, format="7.3",

@@ -1,0 +1,148 @@
+"""A position-controlled apparatus (``perturbation.kind = "position"``, log-format.md).
+
+An actuator servo imposes the perturbation on the joint(s); a torque sensor between
+actuator and limb measures ``tau_h``. The diagnosis re-simulates the limb model
+(``diagnosis.limb``: intrinsic K, B, I per joint plus the catalogue's limb and apparatus
+effects):
+
+- with a recorded reference ``theta_ref[j]``: the servo tracks it,
+  ``theta, tau_h = limb.servo_response(theta_ref, fs, limb, effects)``; the features are
+  the FRFs ``theta_ref -> theta`` and ``theta_ref -> tau_h``;
+- without one (archived data such as the reklab ankle recordings): the measured angle
+  drives the limb, ``tau_h = limb.limb_torque(theta, fs, limb, effects)``; the feature is
+  the FRF ``theta -> tau_h`` (the joint's impedance).
+
+Only the coherent (FRF) features are compared: the limb's own torque not coherent with
+the perturbation (voluntary activity, sensor noise) is not modelled, so its spectrum is
+no evidence for or against a model. The limb is estimated as ``armimp estimate`` does
+(``direct`` method from theta to tau_h without a reference, ``full`` with one), with the
+sampling the trials declare (real recordings: instantaneous).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+import trialformat as tf
+
+from ..arm import estimate_arm
+from ..errors import DiagnosisInputError
+from .base import Experiment
+
+
+class PositionServo(Experiment):
+    """Position servo with a torque sensor between actuator and limb (any n >= 1)."""
+
+    kind = "position"
+    title = "position servo imposes the angle, torque sensor between actuator and limb"
+    declared_keys = ("fs", "n_dof")
+    feature_kinds = ("frf",)
+
+    @classmethod
+    def accepts(cls, trials) -> bool:
+        return all(t.perturbation_kind == "position" for t in trials)
+
+    def check_metadata(self, trials) -> None:
+        with_ref = {t.name: t.theta_ref is not None for t in trials}
+        if len(set(with_ref.values())) > 1:
+            raise DiagnosisInputError(
+                f"position trials with and without a recorded theta_ref in one diagnosis "
+                f"({with_ref}): one experiment either tracks a reference or not")
+
+    def perturbation_signal(self, trial) -> str:
+        return "theta_ref" if trial.theta_ref is not None else "theta"
+
+    def output_signals(self, trial) -> tuple:
+        return ("theta", "tau_h") if trial.theta_ref is not None else ("tau_h",)
+
+    def estimate(self, trials):
+        return estimate_arm(trials)
+
+    def simulator(self, model, *, plant=None, rk4_step=None):
+        from .. import limb as lm
+        limb = limb_of(model)
+
+        def simulate(trial, effects, n_samples):
+            n = int(n_samples)
+            fs = trial.fs
+            try:
+                if trial.theta_ref is not None:
+                    theta, tau = lm.servo_response(trial.theta_ref[:n], fs, limb, effects or {})
+                else:
+                    theta = np.array(trial.theta[:n], dtype=float)
+                    tau = lm.limb_torque(theta, fs, limb, effects or {})
+            except (FloatingPointError, OverflowError, np.linalg.LinAlgError):
+                return None
+            theta, tau = np.asarray(theta, float), np.asarray(tau, float)
+            if not (np.isfinite(theta).all() and np.isfinite(tau).all()):
+                return None
+            return tf.Trial(meta=trial.meta, t=trial.t[:n], theta=theta.reshape(n, -1),
+                            tau_h=tau.reshape(n, -1),
+                            theta_ref=None if trial.theta_ref is None else trial.theta_ref[:n],
+                            name=f"{trial.name}-sim")
+        return simulate
+
+    # ------------------------------------------------------------------ fits
+    def fit_effects(self, trials, effects, config):
+        """Which / how far for a position experiment: every applicable effect fitted by
+        variable projection (diagnosis.limbfit: K, B, I and the effect's gain-like
+        parameters linear, the others searched), calibrated on the first
+        ``config.time_split_fraction`` of every trial, its gap on the rest (held out);
+        95 % jackknife intervals for the best fit.
+
+        Returns
+        -------
+        dict
+            ``fits`` (fitting.EffectFit, best first, each with ``intervals`` and the
+            re-estimated limb as ``model``), ``g0_cal``, ``g0_held``, ``g0_all``,
+            ``significant``, ``threshold``, ``noise_floor``, ``measure``.
+        """
+        from .. import limbfit as lf
+        from ..fitting import EffectFit
+        cfg = lf.FitConfig(held_out_fraction=1.0 - config.time_split_fraction,
+                           effects=tuple(effects))
+        records = [lf.PositionRecord.from_trial(t) for t in trials]
+        preps = lf.prepare(records, cfg)
+        nominal = lf.fit_nominal(preps, cfg)
+        g = nominal["gaps"]
+        significant = bool(g["all"].significant(cfg))
+        # effects are fitted only when there is a gap to explain (as limbfit does)
+        names = lf.candidates(preps, effects) if effects and significant else []
+        fits = [lf.fit_effect(preps, nm, nominal, cfg, intervals=False) for nm in names]
+        fits.sort(key=lambda f: f.calibration_objective)
+        if fits and cfg.n_jackknife >= 2:
+            lf.add_intervals(fits[0], cfg)
+        out = []
+        for f in fits:
+            fit = EffectFit((f.effect,), {f.effect: dict(f.params)}, f.calibration_gap,
+                            f.n_evaluations, held_out_gap=f.held_out_gap,
+                            objective=f.calibration_objective)
+            fit.intervals = None if f.intervals is None else {f.effect: f.intervals}
+            fit.model = model_of(f.limb, trials[0].fs, "limbfit with " + f.effect)
+            fit.bound_flags = list(f.at_search_bound)
+            out.append(fit)
+        return {"fits": out, "g0_cal": g["cal"].value, "g0_held": g["held"].value,
+                "g0_all": g["all"].value, "significant": significant,
+                "threshold": float(cfg.significance_sigma * g["all"].se
+                                   + cfg.floor_margin * g["all"].floor),
+                "noise_floor": float(g["all"].floor),
+                "measure": "limbfit: band energy of the torque residual above the noise "
+                           "floor, relative to the torque energy (diagnosis.limbfit)",
+                "nominal_limb": model_of(nominal["limb"], trials[0].fs, "limbfit nominal")}
+
+
+def limb_of(model):
+    """The diagnosis.limb.LimbModel of an ArmModel (I = the fitted inertia M)."""
+    from .. import limb as lm
+    return lm.LimbModel(K=np.atleast_2d(np.asarray(model.K, float)),
+                        B=np.atleast_2d(np.asarray(model.B, float)),
+                        I=np.atleast_2d(np.asarray(model.M, float)))
+
+
+def model_of(limb, fs, method):
+    """An ArmModel holding a limbfit LimbModel (for the simulator and the report)."""
+    from ..arm import ArmModel
+    n = limb.K.shape[0]
+    return ArmModel(M=np.asarray(limb.I, float), B=np.asarray(limb.B, float),
+                    K=np.asarray(limb.K, float), r2=np.full((n, n), np.nan), method=method,
+                    fs=fs, inertia_delay_s=0.0)

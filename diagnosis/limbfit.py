@@ -1,0 +1,721 @@
+"""Fitting the limb/position-servo effects of the catalogue (docs/diagnosis.md, section
+"The limb and the position-servo catalogue").
+
+A position experiment gives the imposed angle theta (N, n) [rad], the measured torque tau
+(N, n) [N m] and, when recorded, the servo reference theta_ref. The model of a candidate
+effect E with parameters p is diagnosis.limb: tau = limb_torque(theta; K, B, I, E(p)).
+That model is *linear* in K, B, I and in the effect's gain-like parameters (reflex gain,
+wobbling mass) once the other parameters are fixed, so the fit is a variable projection:
+
+* for given nonlinear parameters (reflex delay and activation frequency, stiffness
+  exponent, drift rate, wobbling frequency, sensor time constant, channel delay), the
+  linear ones and every entry of K, B, I (plus a torque offset and trend per trial and
+  joint) come from one least-squares solve on the calibration samples;
+* the nonlinear ones are searched on a grid over the catalogue's search bounds, then
+  refined by Nelder-Mead from the best grid points;
+* discrete choices (a rectified reflex or not) are tried in turn.
+
+Both sides are low-passed by the same zero-phase Butterworth filter (``band_hz``) before
+the solve, which keeps the model relation exact (the filter is linear) and bounds the
+noise that double differentiation of the measured angle brings.
+
+The gap (the misfit above noise) is computed in the frequency domain: the Welch spectrum
+of the torque residual integrated over the analysis band, minus the noise floor expected
+there. The floor is measured from the recording itself: torque and angle noise are taken
+as white, at the level of their spectra in the band [0.25, 0.45] fs where the
+perturbation carries no power, the angle's noise mapped through the nominal impedance.
+The gap is the remaining energy relative to the torque energy of the band; with a
+recorded theta_ref the servo's angle tracking error is added the same way. A nominal gap
+is significant when it exceeds ``significance_sigma`` standard errors of the Welch
+estimate plus ``floor_margin`` times the floor.
+
+Intervals: delete-one-block jackknife over ``n_jackknife`` contiguous blocks of the
+calibration samples (each block's fit refined from the full fit), +- 1.96 standard
+errors: contiguous blocks respect the residual's correlation in time, which the Jacobian
+of a least-squares fit ignores.
+
+The fit uses only the calibration part (the first ``1 - held_out_fraction`` of every
+trial); the held-out reduction is 1 - gap(effect) / gap(nominal) on the last part, with
+the calibration fit's parameters, K, B and I.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize
+from scipy import signal
+
+from . import catalogue as cat
+from . import limb as lm
+
+VERDICT_EFFECT = "effect"
+VERDICT_NONE = "no significant gap"
+VERDICT_UNEXPLAINED = "unexplained"
+
+#: parameters solved linearly (variable projection), per effect
+LINEAR = {"stretch_reflex": ("gain",), "wobbling_mass": ("mass",)}
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """Settings of the position-experiment fits (defaults used by the validation).
+
+    band_hz : analysis low-pass cut-off [Hz] (clipped to 0.2 fs).
+    band_low_hz : lowest frequency of the gap integral [Hz].
+    lowpass_order : Butterworth order of the analysis low-pass (applied forwards and back).
+    welch_s : Welch segment length [s].
+    held_out_fraction : last part of every trial kept for the held-out check.
+    edge_s : (first, last) seconds of every trial left out of fits and gaps.
+    n_jackknife : calibration blocks of the jackknife intervals (0: no intervals).
+    significance_sigma, floor_margin : the nominal gap's significance threshold.
+    name_reduction : held-out reduction an effect needs to be named.
+    grid : grid points per nonlinear parameter; refine_starts: grid points refined.
+    """
+
+    band_hz: float = 30.0
+    band_low_hz: float = 0.3
+    lowpass_order: int = 8
+    welch_s: float = 2.0
+    held_out_fraction: float = 1.0 / 3.0
+    n_jackknife: int = 6
+    significance_sigma: float = 4.0
+    floor_margin: float = 0.1
+    name_reduction: float = 0.5
+    grid: int = 12
+    refine_starts: int = 2
+    effects: tuple = ()
+    edge_s: tuple = (1.0, 0.5)
+
+
+@dataclass
+class PositionRecord:
+    """One position-perturbation trial as the fits see it.
+
+    theta, tau : (N, n) measured angle [rad] and torque [N m] (device on limb);
+    theta_ref : (N, n) servo reference [rad] or None; fs [Hz]; name for messages.
+    """
+
+    theta: np.ndarray
+    tau: np.ndarray
+    fs: float
+    theta_ref: np.ndarray | None = None
+    name: str = ""
+
+    def __post_init__(self):
+        self.theta = lm._as_signal(self.theta, f"{self.name or 'trial'} theta")
+        n = self.theta.shape[1]
+        self.tau = lm._as_signal(self.tau, f"{self.name or 'trial'} tau_h", n)
+        if self.tau.shape[0] != self.theta.shape[0]:
+            raise ValueError(f"{self.name or 'trial'}: theta has {self.theta.shape[0]} "
+                             f"samples, tau_h {self.tau.shape[0]}")
+        if self.theta_ref is not None:
+            self.theta_ref = lm._as_signal(self.theta_ref, f"{self.name or 'trial'} "
+                                           f"theta_ref", n)
+        self.fs = float(self.fs)
+
+    @property
+    def n_dof(self) -> int:
+        return int(self.theta.shape[1])
+
+    @classmethod
+    def from_trial(cls, trial) -> "PositionRecord":
+        """From a trialformat.Trial of a position perturbation (theta, tau_h[, theta_ref])."""
+        return cls(trial.signal("theta"), trial.signal("tau_h"), trial.fs,
+                   trial.theta_ref, trial.name)
+
+
+# ----------------------------------------------------------------------------- design
+class _Prepared:
+    """Per-record cached signals: derivatives, low-passed torque, masks, noise floors."""
+
+    def __init__(self, rec: PositionRecord, cfg: FitConfig):
+        self.rec, self.fs, self.n = rec, rec.fs, rec.n_dof
+        N = rec.theta.shape[0]
+        self.N = N
+        self.band = min(cfg.band_hz, 0.2 * rec.fs)
+        self.sos = signal.butter(cfg.lowpass_order, self.band, fs=rec.fs, output="sos")
+        self._zi = signal.sosfilt_zi(self.sos)
+        # low-passed signals are kept every D-th sample (D fs / D >= 4 band): the fits
+        # solve on those rows, the gap's spectra use fs_d
+        self.D = max(1, int(rec.fs // (4.0 * self.band)))
+        self.fs_d = rec.fs / self.D
+        self.omega, self.alpha = lm.derivatives(rec.theta, rec.fs)
+        self.tau_lp = self.lp(rec.tau)
+        Nd = self.tau_lp.shape[0]
+        self.Nd = Nd
+        n_cal = int(round(Nd * (1.0 - cfg.held_out_fraction)))
+        self.cal = np.zeros(Nd, bool)
+        self.cal[:n_cal] = True
+        self.held = ~self.cal
+        # the ends are left out of every fit and gap: one-sided derivatives, the filters'
+        # start from rest and the zero-phase low-pass's edges live there
+        head, tail = int(round(cfg.edge_s[0] * self.fs_d)), int(round(cfg.edge_s[1] * self.fs_d))
+        if head + tail >= Nd // 2:
+            raise ValueError(f"{rec.name or 'trial'}: {N / rec.fs:g} s is too short for the "
+                             f"position fits (at least {4 * sum(cfg.edge_s):g} s)")
+        self.cal[:head] = False
+        self.held[Nd - tail:] = False
+        if rec.theta_ref is not None:
+            self.theta_lp = self.lp(rec.theta)
+        self.t = (np.arange(N) / rec.fs)[::self.D]
+        self.base = self._base_columns()
+        self.offset_cols = self.offsets()
+        self.noise_tau = _white_level(rec.tau, rec.fs)
+        self.noise_theta = _white_level(rec.theta, rec.fs)
+
+    def lp(self, x):
+        """Zero-phase low-pass (forwards and backwards, odd extension of 0.5 s at each
+        end, each pass started at its first value), every D-th sample kept."""
+        pad = min(x.shape[0] - 1, int(0.5 * self.fs))
+        ext = np.concatenate([2 * x[:1] - x[pad:0:-1], x, 2 * x[-1:] - x[-2:-pad - 2:-1]])
+        zi = self._zi.reshape(self._zi.shape + (1,) * (ext.ndim - 1))
+        y, _ = signal.sosfilt(self.sos, ext, axis=0, zi=zi * ext[:1])
+        y = y[::-1]
+        y, _ = signal.sosfilt(self.sos, y, axis=0, zi=zi * y[:1])
+        return y[::-1][pad:pad + x.shape[0]][::self.D]
+
+    def intrinsic_raw(self, scale=None):
+        """Raw (N, n, 3 n^2) columns of K, B, I entries (K columns scaled)."""
+        n, N = self.n, self.N
+        cols = np.zeros((N, n, 3 * n * n))
+        th = self.rec.theta
+        if scale is not None:
+            scale = np.broadcast_to(scale, th.shape)
+        for j in range(n):
+            for k in range(n):
+                c = j * n + k
+                cols[:, j, c] = th[:, k] * (1.0 if scale is None else scale[:, j])
+                cols[:, j, n * n + c] = self.omega[:, k]
+                cols[:, j, 2 * n * n + c] = self.alpha[:, k]
+        return cols
+
+    def offsets(self):
+        n, N = self.n, self.Nd
+        cols = np.zeros((N, n, 2 * n))
+        for j in range(n):
+            cols[:, j, j] = 1.0
+            cols[:, j, n + j] = self.t - self.t[-1] / 2
+        return cols
+
+    def _base_columns(self):
+        raw = self.intrinsic_raw()
+        return self.lp(raw.reshape(self.N, -1)).reshape((self.Nd,) + raw.shape[1:])
+
+    def columns(self, name: str | None, params: dict):
+        """Low-passed design columns (N, n, p) shared across records, for the effect
+        ``name`` with nonlinear ``params`` (linear ones excluded)."""
+        eff = {} if name is None else {name: _with_unit_linear(name, params)}
+        channel = name in lm.CHANNEL_EFFECTS
+        scaled = name in ("stiffness_amplitude", "stiffness_drift")
+        extra = []
+        if name == "stretch_reflex":
+            extra.append(lm.reflex_torque(self.omega, self.fs, eff[name]))
+        elif name == "wobbling_mass":
+            p = lm.effect_params(name, eff[name])
+            b, a = lm.second_order_lowpass(float(p["frequency_hz"]), float(p["damping"]),
+                                           self.fs, numerator="spring_damper")
+            extra.append(signal.lfilter(b, a, self.alpha, axis=0))
+        if not channel and not scaled:
+            cols = self.base
+            if extra:
+                ex = self.lp(np.stack(extra, axis=2).reshape(self.N, -1))
+                cols = np.concatenate([cols, ex.reshape(self.Nd, self.n, -1)], axis=2)
+            return cols
+        scale = lm.stiffness_scale(self.rec.theta, self.fs, eff) if scaled else None
+        raw = self.intrinsic_raw(scale)
+        if channel:
+            shape = raw.shape
+            raw = lm.channel_apply(raw.reshape(self.N, -1), self.fs, eff).reshape(shape)
+        return self.lp(raw.reshape(self.N, -1)).reshape((self.Nd,) + raw.shape[1:])
+
+
+def _with_unit_linear(name, params):
+    p = dict(params)
+    for key in LINEAR.get(name, ()):
+        p[key] = 1.0
+    return p
+
+
+def _white_level(x, fs):
+    """Median Welch PSD of each column of x in [0.25, 0.45] fs (the white noise level)."""
+    f, p = signal.welch(x, fs=fs, nperseg=min(x.shape[0], 1024), axis=0)
+    sel = (f >= 0.25 * fs) & (f <= 0.45 * fs)
+    return np.median(p[sel], axis=0)
+
+
+# ----------------------------------------------------------------------------- solve
+@dataclass
+class _Solution:
+    coef: np.ndarray            # shared coefficients (p,)
+    offsets: list               # per record (2n,)
+    residual: list              # per record low-passed torque residual (N, n)
+    cal_energy: float           # sum over records of the normalised calibration SSR
+
+
+def _solve(preps, cols_list, masks=None) -> _Solution:
+    """Least squares of the low-passed torque on shared columns + per-record offsets."""
+    p = cols_list[0].shape[2]
+    n_off = [2 * pr.n for pr in preps]
+    rows_a, rows_y = [], []
+    offs = [pr.offset_cols for pr in preps]
+    total_off = sum(n_off)
+    start = 0
+    for i, (pr, cols) in enumerate(zip(preps, cols_list)):
+        m = pr.cal if masks is None else masks[i]
+        A = np.zeros((int(m.sum()) * pr.n, p + total_off))
+        A[:, :p] = cols[m].reshape(-1, p)
+        A[:, p + start:p + start + n_off[i]] = offs[i][m].reshape(-1, n_off[i])
+        rows_a.append(A / pr.norm)
+        rows_y.append(pr.tau_lp[m].reshape(-1) / pr.norm)
+        start += n_off[i]
+    A = np.vstack(rows_a)
+    y = np.concatenate(rows_y)
+    scale = np.sqrt(np.sum(A * A, axis=0))
+    scale[scale == 0] = 1.0
+    As = A / scale
+    try:  # normal equations of the column-scaled problem (p is small; fast under load)
+        x = np.linalg.solve(As.T @ As, As.T @ y)
+    except np.linalg.LinAlgError:
+        x, *_ = np.linalg.lstsq(As, y, rcond=None)
+    x = x / scale
+    coef = x[:p]
+    residual, offsets, energy, start = [], [], 0.0, 0
+    for i, (pr, cols) in enumerate(zip(preps, cols_list)):
+        o = x[p + start:p + start + n_off[i]]
+        start += n_off[i]
+        r = pr.tau_lp - cols @ coef - offs[i] @ o
+        m = pr.cal if masks is None else masks[i]
+        energy += float(np.sum(r[m] ** 2)) / pr.norm ** 2
+        residual.append(r)
+        offsets.append(o)
+    return _Solution(coef, offsets, residual, energy)
+
+
+def _limb_from(coef, n) -> lm.LimbModel:
+    nn = n * n
+    return lm.LimbModel(coef[:nn].reshape(n, n), coef[nn:2 * nn].reshape(n, n),
+                        coef[2 * nn:3 * nn].reshape(n, n))
+
+
+# ----------------------------------------------------------------------------- gap
+def _band_energy(r, pr: _Prepared, mask, cfg: FitConfig, floor_fn=None):
+    """(energy above the floor, standard error) of residual r (N, n) on ``mask`` rows,
+    integrated over [band_low_hz, band] (the low-pass response applied to the floor)."""
+    x = r[mask]
+    nper = int(min(x.shape[0], round(cfg.welch_s * pr.fs_d)))
+    f, P = signal.welch(x, fs=pr.fs_d, nperseg=nper, axis=0)
+    sel = (f >= cfg.band_low_hz) & (f <= pr.band)
+    df = f[1] - f[0]
+    n_avg = max(1.0, 2.0 * x.shape[0] / nper - 1.0)
+    E = float(np.sum(P[sel])) * df
+    se = float(np.sqrt(np.sum(P[sel] ** 2) / n_avg)) * df * 1.5
+    floor = 0.0
+    if floor_fn is not None:
+        _, h = signal.sosfreqz(pr.sos, worN=f[sel], fs=pr.fs)  # the filter ran at fs
+        floor = float(np.sum(floor_fn(f[sel]) * np.abs(h) ** 4)) * df
+    return E - floor, se, floor
+
+
+def _torque_floor(pr: _Prepared, limb: lm.LimbModel):
+    """Expected residual noise PSD at f summed over joints: torque noise plus the angle
+    noise through the impedance K + j w B - w^2 I."""
+    def fn(f):
+        w = 2 * np.pi * f
+        out = np.full(f.shape, float(np.sum(pr.noise_tau)))
+        for j in range(pr.n):
+            for k in range(pr.n):
+                z = limb.K[j, k] + 1j * w * limb.B[j, k] - w * w * limb.I[j, k]
+                out += np.abs(z) ** 2 * pr.noise_theta[k]
+        return out
+    return fn
+
+
+@dataclass
+class _Gap:
+    value: float          # relative excess energy (clipped at 0)
+    excess: float         # unclipped
+    se: float             # standard error of ``excess``
+    floor: float          # relative noise floor
+
+    def significant(self, cfg: FitConfig) -> bool:
+        return self.excess > cfg.significance_sigma * self.se + cfg.floor_margin * self.floor
+
+
+def _gap(preps, residuals, angle_residuals, limb0, cfg, part: str) -> _Gap:
+    ex = se2 = fl = 0.0
+    for pr, r, ra in zip(preps, residuals, angle_residuals):
+        mask = pr.cal if part == "cal" else pr.held if part == "held" else pr.cal | pr.held
+        ref_e, _, _ = _band_energy(pr.tau_lp - pr.tau_lp[mask].mean(axis=0), pr, mask, cfg)
+        e, s, f = _band_energy(r, pr, mask, cfg, _torque_floor(pr, limb0))
+        ex += e / ref_e
+        se2 += (s / ref_e) ** 2
+        fl += f / ref_e
+        if ra is not None:
+            th_e, _, _ = _band_energy(pr.theta_lp - pr.theta_lp[mask].mean(axis=0), pr, mask,
+                                      cfg)
+            e, s, f = _band_energy(ra, pr, mask, cfg,
+                                   lambda f: np.full(f.shape, float(np.sum(pr.noise_theta))))
+            ex += e / th_e
+            se2 += (s / th_e) ** 2
+            fl += f / th_e
+    return _Gap(max(ex, 0.0), ex, math.sqrt(se2), fl)
+
+
+def _angle_residual(pr: _Prepared, params: dict | None):
+    """Low-passed measured angle minus the servo's angle (ideal or band-limited)."""
+    if pr.rec.theta_ref is None:
+        return None
+    eff = {} if params is None else {"servo_bandwidth": params}
+    return pr.theta_lp - pr.lp(lm.servo_angle(pr.rec.theta_ref, pr.fs, eff))
+
+
+# ----------------------------------------------------------------------------- search
+def _nonlinear(name):
+    e = cat.get_effect(name)
+    return [p for p in e.parameters if p.name not in LINEAR.get(name, ())]
+
+
+def _to_x(p, v):
+    """Search coordinate of value v: 0 at the lower bound, 1 at the upper (log scale for
+    log parameters)."""
+    t = (lambda u: math.log(u)) if p.log else float
+    lo, hi = p.bounds
+    return (t(v) - t(lo)) / (t(hi) - t(lo))
+
+
+def _from_x(p, x):
+    lo, hi = p.bounds
+    x = min(max(float(x), 0.0), 1.0)
+    if p.log:
+        return math.exp(math.log(lo) + x * (math.log(hi) - math.log(lo)))
+    return lo + x * (hi - lo)
+
+
+def _grid(p, n):
+    lo, hi = p.bounds
+    if p.log:
+        return np.exp(np.linspace(math.log(lo), math.log(hi), n))
+    if p.name == "delay_s" and lo < 0 < hi:  # channel delay: dense near zero, both signs
+        g = np.exp(np.linspace(math.log(2e-4), math.log(hi), n // 2))
+        return np.concatenate([-g[::-1], [0.0], g])
+    return np.linspace(lo, hi, n)
+
+
+class _Problem:
+    """Objective of one candidate (effect + discrete choices) over its nonlinear params."""
+
+    def __init__(self, preps, name, fixed, cfg, unit=1.0):
+        self.preps, self.name, self.fixed, self.cfg = preps, name, dict(fixed), cfg
+        self.unit = unit or 1.0  # objectives relative to the nominal one
+        self.nl = _nonlinear(name) if name else []
+        self.masks = None
+        self.n_eval = 0
+        self.servo = name == "servo_bandwidth"
+        if self.servo:
+            self._torque = _solve(preps, [pr.base for pr in preps])
+
+    def params(self, x) -> dict:
+        return {**self.fixed, **{p.name: _from_x(p, xi) for p, xi in zip(self.nl, x)}}
+
+    def evaluate(self, params: dict):
+        """(objective, torque solution, angle residuals)."""
+        self.n_eval += 1
+        if self.servo:
+            sol = self._torque if self.masks is None else _solve(
+                self.preps, [pr.base for pr in self.preps], self.masks)
+            ang = [_angle_residual(pr, params) for pr in self.preps]
+        else:
+            try:
+                cols = [pr.columns(self.name, params) for pr in self.preps]
+            except ValueError:
+                return math.inf, None, None
+            sol = _solve(self.preps, cols, self.masks)
+            ang = [_angle_residual(pr, None) for pr in self.preps]
+        obj = sol.cal_energy
+        for i, (pr, a) in enumerate(zip(self.preps, ang)):
+            if a is not None:
+                m = pr.cal if self.masks is None else self.masks[i]
+                obj += float(np.sum(a[m] ** 2)) / pr.theta_norm ** 2
+        return obj, sol, ang
+
+    def objective(self, x):
+        return self.evaluate(self.params(x))[0] / self.unit
+
+    def search(self, start=None):
+        """Grid then Nelder-Mead; returns the best x (array)."""
+        if not self.nl:
+            return np.zeros(0)
+        if start is not None:
+            return self._refine(np.asarray(start, float), maxiter=15 * len(self.nl))
+        grids = [_grid(p, self.cfg.grid if len(self.nl) == 1 else
+                       max(6, int(self.cfg.grid * (1.3 if p.name == "delay_s" else 0.7))))
+                 for p in self.nl]
+        pts = np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(grids), -1).T
+        vals = [self.evaluate({**self.fixed, **{p.name: v for p, v in zip(self.nl, pt)}})[0]
+                for pt in pts]
+        order = np.argsort(vals)[:self.cfg.refine_starts]
+        best_x, best_v = None, math.inf
+        for i in order:
+            x0 = np.array([_to_x(p, v) for p, v in zip(self.nl, pts[i])])
+            x = self._refine(x0)
+            v = self.objective(x)
+            if v < best_v:
+                best_x, best_v = x, v
+        return best_x
+
+    def _refine(self, x0, maxiter=None):
+        step = 0.03 if maxiter is None else 0.01  # of the search span
+        simplex = [x0] + [x0 + np.eye(len(x0))[i] * (step if x0[i] < 0.5 else -step)
+                          for i in range(len(x0))]
+        res = optimize.minimize(self.objective, x0, method="Nelder-Mead",
+                                options={"initial_simplex": np.array(simplex),
+                                         "xatol": 2e-5, "fatol": 1e-8,
+                                         "maxiter": maxiter or 40 * len(x0)})
+        return res.x
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass
+class EffectFit:
+    """One candidate's fit.
+
+    params : primary parameters (catalogue names; plus discrete choices);
+    intervals : {param: [low, high]} 95 % jackknife intervals (None without jackknife);
+    limb : the K, B, I re-estimated with the effect;
+    calibration_objective : normalised calibration SSR (lower is better);
+    calibration_gap, held_out_gap : relative gaps above noise;
+    held_out_reduction : 1 - held-out gap / nominal held-out gap (None when no nominal gap);
+    at_search_bound : catalogue.at_search_bound messages.
+    """
+
+    effect: str
+    params: dict
+    intervals: dict | None
+    limb: lm.LimbModel
+    calibration_objective: float
+    calibration_gap: float
+    held_out_gap: float
+    held_out_reduction: float | None
+    at_search_bound: list = field(default_factory=list)
+    n_evaluations: int = 0
+
+    def as_dict(self) -> dict:
+        return {"effects": [self.effect], "effect": self.effect, "params": self.params,
+                "intervals": self.intervals, "K": self.limb.K.tolist(),
+                "B": self.limb.B.tolist(), "I": self.limb.I.tolist(),
+                "calibration_objective": self.calibration_objective,
+                "calibration_gap": self.calibration_gap, "held_out_gap": self.held_out_gap,
+                "held_out_reduction": self.held_out_reduction,
+                "at_search_bound": self.at_search_bound,
+                "n_evaluations": self.n_evaluations}
+
+
+@dataclass
+class PositionDiagnosis:
+    """The which / how-far / verdict of a set of position trials.
+
+    verdict : VERDICT_EFFECT, VERDICT_NONE or VERDICT_UNEXPLAINED;
+    named : [effect] or [];
+    fitted : {effect: params} of the named effect; intervals likewise;
+    nominal : the nominal fit (limb K, B, I; gaps); ranking : EffectFit dicts, best first;
+    gap : nominal gaps (calibration, held-out, all), threshold, the named held-out reduction.
+    """
+
+    verdict: str
+    named: list
+    fitted: dict
+    intervals: dict
+    nominal: dict
+    ranking: list
+    gap: dict
+    elapsed_s: float
+    n_evaluations: int
+
+
+def _norms(preps):
+    for pr in preps:
+        pr.norm = float(np.std(pr.tau_lp[pr.cal])) or 1.0
+        if pr.rec.theta_ref is not None:
+            pr.theta_norm = float(np.std(pr.theta_lp[pr.cal])) or 1.0
+
+
+def prepare(records, cfg: FitConfig = FitConfig()):
+    """Cached per-record signals for repeated fits (list of records)."""
+    if not records:
+        raise ValueError("no position trials to fit")
+    n = {r.n_dof for r in records}
+    if len(n) != 1:
+        raise ValueError(f"position trials of different joint counts: "
+                         f"{ {r.name: r.n_dof for r in records} }")
+    preps = [_Prepared(r, cfg) for r in records]
+    _norms(preps)
+    return preps
+
+
+def fit_nominal(preps, cfg: FitConfig = FitConfig()) -> dict:
+    """The nominal model (1): K, B, I on the calibration parts; gaps."""
+    sol = _solve(preps, [pr.base for pr in preps])
+    limb = _limb_from(sol.coef, preps[0].n)
+    ang = [_angle_residual(pr, None) for pr in preps]
+    gaps = {part: _gap(preps, sol.residual, ang, limb, cfg, part)
+            for part in ("cal", "held", "all")}
+    return {"limb": limb, "solution": sol, "gaps": gaps}
+
+
+def candidates(preps, effects=None) -> list[str]:
+    """The catalogue's position effects that apply to these records (servo_bandwidth only
+    with a recorded theta_ref), or ``effects`` checked against the catalogue."""
+    have_ref = all(pr.rec.theta_ref is not None for pr in preps)
+    names = list(effects) if effects else list(cat.effects_for("position"))
+    for nm in names:
+        if not cat.get_effect(nm).applies_to("position"):
+            raise ValueError(f"effect {nm!r} does not apply to position experiments; "
+                             f"those are {', '.join(cat.effects_for('position'))}")
+    return [nm for nm in names if nm != "servo_bandwidth" or have_ref]
+
+
+def fit_effect(preps, name: str, nominal: dict, cfg: FitConfig = FitConfig(), *,
+               intervals: bool = True) -> EffectFit:
+    """Fit one catalogue effect (all primary parameters, discrete choices tried in turn)
+    on the calibration parts; held-out gap and jackknife intervals."""
+    effect = cat.get_effect(name)
+    choices = [dict(zip(effect.choices, combo)) for combo in
+               _product(*effect.choices.values())] if effect.choices else [{}]
+    best = None
+    n_eval = 0
+    for fixed in choices:
+        prob = _Problem(preps, name, fixed, cfg, nominal["solution"].cal_energy)
+        x = prob.search()
+        params = prob.params(x)
+        obj, sol, ang = prob.evaluate(params)
+        n_eval += prob.n_eval
+        if best is None or obj < best[0]:
+            best = (obj, sol, ang, params, prob, x)
+    obj, sol, ang, params, prob, x = best
+    lin = {k: float(sol.coef[3 * preps[0].n ** 2 + i])
+           for i, k in enumerate(LINEAR.get(name, ()))}
+    full = {**params, **lin}
+    limb0 = nominal["limb"]
+    limb = _limb_from(sol.coef, preps[0].n)
+    g_cal = _gap(preps, sol.residual, ang, limb0, cfg, "cal")
+    g_held = _gap(preps, sol.residual, ang, limb0, cfg, "held")
+    nom_held = nominal["gaps"]["held"].value
+    reduction = None if nom_held <= 0 else 1.0 - g_held.value / nom_held
+    ci = None
+    if intervals and cfg.n_jackknife >= 2:
+        ci, k = _jackknife(prob, x, lin, cfg)
+        n_eval += k
+    out_params = {p.name: full[p.name] for p in effect.parameters}
+    out_params.update({k: params[k] for k in effect.choices})
+    bound = cat.at_search_bound(name, out_params)
+    if any(v < 0 for k, v in lin.items()):
+        bound = bound + [f"{k} = {v:.4g} < 0 (unphysical)" for k, v in lin.items() if v < 0]
+    fit = EffectFit(name, out_params, ci, limb, obj, g_cal.value, g_held.value,
+                    reduction, bound, n_eval)
+    fit._problem = (prob, x, lin)
+    return fit
+
+
+def add_intervals(fit: EffectFit, cfg: FitConfig = FitConfig()) -> EffectFit:
+    """The jackknife intervals of a fit made with ``intervals=False``."""
+    prob, x, lin = fit._problem
+    fit.intervals, k = _jackknife(prob, x, lin, cfg)
+    fit.n_evaluations += k
+    return fit
+
+
+def _product(*lists):
+    from itertools import product
+    return product(*lists)
+
+
+def _jackknife(prob: _Problem, x, lin, cfg):
+    """Delete-one-block jackknife 95 % intervals of every primary parameter."""
+    m = cfg.n_jackknife
+    names = [p.name for p in prob.nl] + list(lin)
+    reps = []
+    n_eval0 = prob.n_eval
+    for b in range(m):
+        masks = []
+        for pr in prob.preps:
+            idx = np.flatnonzero(pr.cal)
+            blocks = np.array_split(idx, m)
+            mk = pr.cal.copy()
+            mk[blocks[b]] = False
+            masks.append(mk)
+        prob.masks = masks
+        xb = prob.search(start=x) if prob.nl else x
+        params = prob.params(xb)
+        _, sol, _ = prob.evaluate(params)
+        vals = [params[p.name] for p in prob.nl]
+        vals += [float(sol.coef[3 * prob.preps[0].n ** 2 + i]) for i in range(len(lin))]
+        reps.append(vals)
+    prob.masks = None
+    reps = np.array(reps)
+    full = np.array([prob.params(x)[p.name] for p in prob.nl] + list(lin.values()))
+    se = np.sqrt((m - 1) / m * np.sum((reps - reps.mean(axis=0)) ** 2, axis=0))
+    return ({nm: [float(v - 1.96 * s), float(v + 1.96 * s)]
+             for nm, v, s in zip(names, full, se)}, prob.n_eval - n_eval0)
+
+
+def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosis:
+    """Which catalogue effect closes the gap of these position trials, and how far.
+
+    Parameters
+    ----------
+    records : list of PositionRecord (or trialformat.Trial of position perturbations)
+        Trials of one set-up (same joint count).
+    cfg : FitConfig
+
+    Returns
+    -------
+    PositionDiagnosis
+        The verdict is VERDICT_NONE when the nominal gap (all samples) is not significant,
+        VERDICT_EFFECT naming the best effect (lowest calibration objective) when its
+        fit is inside the search bounds and closes at least ``name_reduction`` of the
+        held-out gap, else VERDICT_UNEXPLAINED.
+
+    Raises
+    ------
+    ValueError
+        No trials, mixed joint counts, bad signals (named), an effect not of this kind.
+    """
+    t0 = time.perf_counter()
+    records = [r if isinstance(r, PositionRecord) else PositionRecord.from_trial(r)
+               for r in records]
+    preps = prepare(records, cfg)
+    nominal = fit_nominal(preps, cfg)
+    g = nominal["gaps"]
+    threshold = cfg.significance_sigma * g["all"].se + cfg.floor_margin * g["all"].floor
+    significant = g["all"].significant(cfg)
+    fits = []
+    if significant:
+        fits = [fit_effect(preps, nm, nominal, cfg, intervals=False)
+                for nm in candidates(preps, cfg.effects)]
+        fits.sort(key=lambda f: f.calibration_objective)
+        if fits and cfg.n_jackknife >= 2:
+            add_intervals(fits[0], cfg)
+    verdict, named = VERDICT_NONE, []
+    if significant:
+        verdict = VERDICT_UNEXPLAINED
+        if fits and not fits[0].at_search_bound and fits[0].held_out_reduction is not None \
+                and fits[0].held_out_reduction >= cfg.name_reduction:
+            verdict, named = VERDICT_EFFECT, [fits[0].effect]
+    best = fits[0] if named else None
+    limb0 = nominal["limb"]
+    return PositionDiagnosis(
+        verdict=verdict, named=named,
+        fitted={best.effect: best.params} if best else {},
+        intervals={best.effect: best.intervals} if best else {},
+        nominal={"K": limb0.K.tolist(), "B": limb0.B.tolist(), "I": limb0.I.tolist()},
+        ranking=[f.as_dict() for f in fits],
+        gap={"nominal_all": g["all"].value, "nominal_calibration": g["cal"].value,
+             "nominal_held_out": g["held"].value, "nominal_excess": g["all"].excess,
+             "significance_threshold": threshold, "noise_floor": g["all"].floor,
+             "named_held_out_reduction": best.held_out_reduction if best else None},
+        elapsed_s=time.perf_counter() - t0,
+        n_evaluations=sum(f.n_evaluations for f in fits))

@@ -1,0 +1,48 @@
+"""The diagnosis as a pipeline of stages passing one :class:`DiagnosisRun` forward.
+
+====  ============  ==========================================================
+ 1    read          the measured trials, blind (inputs.py); options checked
+ 2    conventions   declared conventions, angles, ``t``, storage; the experiment
+ 3    estimate      the limb, with the trials' sampling and leakage; torque sign
+ 4    nominal       split; workers; nominal runs; evaluators and nominal gaps
+ 5    where         the gap by signal, joint, band, kind, level
+ 6    which         each applicable effect fitted alone; pairs
+ 7    how_far       calibration and held-out reductions of every fit
+ 8    verdict       the named effect(s); the named model's runs; the summary
+ 9    report        DiagnosisReport; the report folder, written atomically
+====  ============  ==========================================================
+
+Each stage is a module with ``run(r)``; the data flow one way, from stage to stage
+through ``r``. Stages 4-8 share the workers (``r.runner``) and, with an out folder, the
+resume store (pipeline.resume), so a killed diagnosis re-run with the same inputs and
+options redoes only the tasks it had not finished.
+"""
+
+from __future__ import annotations
+
+from . import conventions, estimate, how_far, nominal, read, report, verdict, where, which
+from .resume import ResumeStore, run_key
+from .state import DiagnosisRun
+
+STAGES = (read, conventions, estimate, nominal, where, which, how_far, verdict, report)
+
+
+def run(r: DiagnosisRun) -> DiagnosisRun:
+    """Run every stage on ``r`` (its options set); returns ``r`` with ``r.report``."""
+    if r.out_dir is not None:
+        report.check_out_dir(r.out_dir, r.source)
+    try:
+        for stage in STAGES:
+            if stage is nominal and r.out_dir is not None:
+                r.resume = ResumeStore(r.out_dir, run_key(r.trials, r.config, r.plant,
+                                                          r.rk4_step))
+            if stage is report and r.runner is not None:
+                r.runner.close()
+            stage.run(r)
+    finally:
+        if r.runner is not None:
+            r.runner.close()
+    return r
+
+
+__all__ = ["DiagnosisRun", "STAGES", "run"]

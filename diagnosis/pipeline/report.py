@@ -1,0 +1,129 @@
+"""Stage 9, report: the :class:`DiagnosisReport` and, with an out folder, the report
+folder (report.md, report.json, PNG plots) written whole or not at all."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+from trialformat import logs as tf
+
+from ..errors import DiagnosisInputError
+from ..report import DiagnosisReport, write_report
+from .resume import CACHE_DIR
+
+
+def build(r) -> DiagnosisReport:
+    """The report of the run ``r`` (every earlier stage done)."""
+    chosen = r.chosen
+    n_parent_sims = len(r.trials) * (2 if chosen is not None else 1)
+    model = r.model.to_dict()
+    behind = None if chosen is None else r.experiment.model_with(
+        r.model, chosen.simulation_effects(r.n_dof))
+    model["behind_named_compliance"] = None if behind is None else behind.to_dict()
+    if chosen is not None and chosen.model is not None:
+        model["with_named_effect"] = chosen.model.to_dict()
+    from .how_far import reduction
+    return DiagnosisReport(
+        verdict=r.verdict, named=r.named, summary=r.summary, amplitude=r.amplitude,
+        conventions=[f.to_dict() for f in r.findings], numerics=r.numerics,
+        timing={"workers": r.workers,
+                "scheduler": None if r.scheduler is None else str(r.scheduler),
+                "phases": r.timings,
+                "resumed_tasks": 0 if r.resume is None else r.resume.n_reused},
+        fitted={} if chosen is None else chosen.params,
+        intervals={} if chosen is None or not chosen.intervals else chosen.intervals,
+        ranking=r.ranking, pairs=r.pair_rows,
+        gap={"nominal_all": r.nominal_all.value, "nominal_calibration": r.g0_cal,
+             "nominal_held_out": r.g0_held,
+             "significance_threshold": r.config.significance_gap,
+             "significant": bool(r.significant),
+             "named_held_out": None if chosen is None else chosen.held_out_gap,
+             "named_held_out_reduction": None if chosen is None else
+             reduction(r.g0_held, chosen.held_out_gap),
+             "named_all": None if r.after is None else r.after.value,
+             **({"fit_measure": r.fit_measure} if r.fit_measure else {})},
+        where=r.where, arm=model,
+        split={"rule": r.rule,
+               "calibration": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
+                               for u in r.cal],
+               "held_out": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
+                            for u in r.held]},
+        config=r.config.to_dict(),
+        n_simulations=n_parent_sims + r.n_worker_sims,
+        elapsed_s=time.perf_counter() - r.t0, trials=[t.name for t in r.trials],
+        experiment={**r.experiment.describe(), "effects_tried": list(r.effects),
+                    "effects_not_applicable": list(r.skipped_effects)},
+        extras={"nominal_all": r.nominal_all, "after_all": r.after, "ev_all": r.ev_all,
+                "ev_named": r.ev_named,
+                "chosen": chosen, "trials": r.trials, "experiment": r.experiment})
+
+
+def run(r) -> None:
+    """Fill ``r.report``; write it when ``r.out_dir`` is set (atomically, see
+    :func:`write_atomically`)."""
+    r.report = build(r)
+    if r.out_dir is not None:
+        r.report.out_dir = Path(r.out_dir)
+        write_atomically(r.report, r.out_dir, r.resume)
+
+
+def check_out_dir(out_dir, source) -> None:
+    """Refuse an out folder that would overwrite what the user wrote: an existing file,
+    a folder that is not an earlier diagnosis report (not empty, no ``report.json``), or
+    the trials' own folder (or one of its parents).
+
+    Raises
+    ------
+    DiagnosisInputError
+        Naming the folder and why.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise DiagnosisInputError(f"--out {out}: exists and is a file, not a report folder; "
+                                  f"choose another path")
+    sources = [Path(source)] if isinstance(source, (str, os.PathLike)) else \
+        [Path(p).parent for p in source]
+    for s in sources:
+        s_dir = s if s.is_dir() else s.parent
+        try:
+            if s_dir.resolve() == out.resolve() or out.resolve() in s_dir.resolve().parents:
+                raise DiagnosisInputError(
+                    f"--out {out}: is the trials' folder {s_dir} (or holds it); the report "
+                    f"would replace the measured trials; choose another folder")
+        except OSError:
+            pass
+    if out.is_dir():
+        names = {p.name for p in out.iterdir()}
+        if names and "report.json" not in names and names != {CACHE_DIR}:
+            raise DiagnosisInputError(
+                f"--out {out}: the folder exists and holds files that are not a diagnosis "
+                f"report ({', '.join(sorted(names)[:5])}{' ...' if len(names) > 5 else ''}); "
+                f"it would be replaced: choose a new or an earlier report folder")
+
+
+def write_atomically(report, out_dir, resume=None) -> Path:
+    """Write the report into a temporary sibling folder, then swap it in place of
+    ``out_dir`` (trialformat.replace_dir): a crash or a full disk leaves the previous
+    report whole. The resume store moves into the new folder; the folder and its files
+    get the user's umask."""
+    out = Path(out_dir)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    try:
+        os.chmod(tmp, 0o777 & ~tf.current_umask())
+        write_report(report, tmp)
+        if resume is not None:
+            resume.keep_only_current()
+            if resume.root.is_dir():
+                os.replace(resume.root, tmp / CACHE_DIR)
+        tf.replace_dir(tmp, out)
+    except BaseException:
+        import shutil
+        if (tmp / CACHE_DIR).is_dir() and resume is not None and not resume.root.exists():
+            os.replace(tmp / CACHE_DIR, resume.root)  # keep what was computed
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out / "report.md"

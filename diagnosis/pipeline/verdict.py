@@ -1,0 +1,115 @@
+"""Stage 8, verdict: the named effect(s), "no significant gap", "partly explained",
+"unexplained" or "convention mismatch"; the named model run on every trial; whether the
+residual depends on the amplitude; the one-sentence summary."""
+
+from __future__ import annotations
+
+from .. import catalogue as cat
+from ..config import (VERDICT_CONVENTION, VERDICT_EFFECT, VERDICT_NONE, VERDICT_PARTLY,
+                      VERDICT_UNEXPLAINED, DiagnosisConfig)
+from ..fitting import EffectFit
+from ..tasks import prefill, task_simulate
+from .how_far import reduction
+from .where import amplitude_dependence, rest_where, where_breakdown
+
+
+def run(r) -> None:
+    """Fill ``r.verdict``, ``r.named``, ``r.chosen``, ``r.after``, ``r.amplitude``,
+    ``r.summary``, ``r.timings``."""
+    verdict, named, chosen = choose(r.significant, r.singles, r.pairs, r.g0_held, r.config)
+    after = None
+    if chosen is not None and chosen.model is not None:
+        # the fit re-estimated the limb with the effect: the named model is that limb
+        from ..evaluation import Evaluator, Unit
+        simulate = r.experiment.simulator(chosen.model, plant=r.state.plant,
+                                          rk4_step=r.rk4_step)
+        full = [Unit(t, 0, t.n_samples, "all") for t in r.trials]
+        r.ev_named = Evaluator(r.experiment, simulate, full, r.config,
+                               norms=r.ev_all.norms)
+        after = r.ev_named.gap(chosen.simulation_effects(r.n_dof))
+        r.where["named"] = None if after is None else where_breakdown(after)
+    elif chosen is not None:
+        effects = chosen.simulation_effects(r.n_dof)
+        runs = r.map(task_simulate, [(i, effects) for i in range(len(r.trials))],
+                     "named model runs")
+        prefill(r.cache, r.trials, effects, runs)
+        after = r.ev_all.gap(effects)
+        r.ev_named = r.ev_all
+        r.where["named"] = None if after is None else where_breakdown(after)
+    r.timings = list(r.runner.timings)
+    residual = after if after is not None else r.nominal_all
+    amplitude = amplitude_dependence(residual, r.trials)
+    if amplitude["amplitude_dependent"] and verdict == VERDICT_EFFECT:
+        verdict = VERDICT_PARTLY  # no linear catalogue effect explains that
+    summary = verdict_text(verdict, named, chosen, r.g0_held, residual, amplitude)
+    if r.numerics:
+        summary += (" Numerical: the plant's RK4 step failed on "
+                    + ", ".join(f"{n['trial']} at {n['failed_rk4_step']:.3g} s"
+                                for n in r.numerics)
+                    + f" and was run at {r.numerics[0]['rk4_step']:.3g} s (a numerical "
+                    "failure, not a model mismatch).")
+    mismatches = [f for f in r.findings if not f.name.startswith("declared") and not f.note]
+    if mismatches:
+        if verdict == VERDICT_NONE:
+            verdict = VERDICT_CONVENTION
+        summary = ("set-up/convention mismatch found and corrected: "
+                   + "; ".join(f.text() for f in mismatches) + ". After correction: "
+                   + summary)
+    r.verdict, r.named, r.chosen, r.after = verdict, named, chosen, after
+    r.amplitude, r.summary = amplitude, summary
+
+
+def choose(significant, singles, pairs, g0_held, cfg):
+    """(verdict, named effects, chosen fit) from the ranked fits.
+
+    Only fits with no parameter on a search bound are candidates. The best such single is
+    replaced by a pair only when the pair's second effect earns its place on both the
+    calibration gap and the held-out gap (:func:`pair_earns_second`).
+    """
+    if not significant:
+        return VERDICT_NONE, [], None
+    best = next((f for f in singles if f.nameable), None)
+    if best is None:
+        return VERDICT_UNEXPLAINED, [], None
+    chosen = next((p for p in pairs if p.nameable and p.effects[0] == best.effects[0]
+                   and pair_earns_second(p, best, cfg)), best)
+    share = reduction(g0_held, chosen.held_out_gap)
+    if share >= cfg.confident_fraction:
+        return VERDICT_EFFECT, list(chosen.effects), chosen
+    if share >= cfg.explained_fraction:
+        return VERDICT_PARTLY, list(chosen.effects), chosen
+    return VERDICT_UNEXPLAINED, [], None
+
+
+def verdict_text(verdict, named, chosen, g0_held, residual, amplitude) -> str:
+    """One sentence: the verdict, what the named effect closes, where the rest lies."""
+    amp = (" The residual is amplitude-dependent (its FRF part differs between "
+           "perturbation levels): no linear catalogue effect explains that."
+           if amplitude["amplitude_dependent"] else "")
+    if verdict == VERDICT_NONE:
+        return "no significant gap: the nominal model reproduces the trials within noise."
+    if chosen is None:
+        return ("unexplained: no catalogue effect closes half of the held-out gap; the gap "
+                "lies in " + "; ".join(rest_where(residual)) + "." + amp)
+    share = 100 * reduction(g0_held, chosen.held_out_gap)
+    text = f"{' + '.join(named)} closes {share:.0f} % of the held-out gap"
+    if verdict == VERDICT_PARTLY:
+        return ("partly explained: " + text + "; the rest lies in "
+                + "; ".join(rest_where(residual)) + "." + amp)
+    return f"{verdict}: {text}." + amp
+
+
+def pair_earns_second(pair: EffectFit, single: EffectFit, cfg: DiagnosisConfig) -> bool:
+    """True when adding the pair's second effect shrinks the gap significantly: below
+    ``pair_gain`` times the single's gap on the calibration units AND on the held-out
+    units, and on the held-out units by more than the significance threshold (what
+    nominal-vs-nominal noise can do), with the second effect fitted above its measured
+    detectability floor (catalogue.below_detectability). A second effect that only fits
+    the calibration units, or at a strength no data set shows, is absorbing noise or model
+    error, not measuring an effect."""
+    second = pair.effects[-1]
+    held_drop = single.held_out_gap - pair.held_out_gap
+    return bool(pair.calibration_gap < cfg.pair_gain * single.calibration_gap
+                and pair.held_out_gap < cfg.pair_gain * single.held_out_gap
+                and held_drop > cfg.significance_gap
+                and not cat.below_detectability(second, pair.params[second]))

@@ -1,0 +1,94 @@
+"""The parallel tasks of a diagnosis (diagnosis.parallel runs them).
+
+Each task is ``fn(state, *args)``: ``state`` (:class:`TaskState`) is what every task of
+one diagnosis reads, sent to each worker once; every worker keeps its own evaluators and
+simulation cache (parallel.worker_cache).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .config import DiagnosisConfig
+from .evaluation import Evaluator, Unit, effects_key
+from .fitting import EffectFit, fit_effect, fit_second, jsonable, refine_pair
+from .parallel import worker_cache
+
+
+@dataclass
+class TaskState:
+    """What every parallel task of one diagnosis reads (sent to each worker once)."""
+
+    token: str
+    trials: list
+    experiment: object
+    model: object
+    config: DiagnosisConfig
+    plant: str | None
+    cal: list     # (trial index, start, stop, role)
+    held: list
+    rk4_step: float | None = None
+
+    def simulator(self):
+        return self.experiment.simulator(self.model, plant=self.plant, rk4_step=self.rk4_step)
+
+
+def prefill(cache: dict, trials, effects: dict, sims) -> None:
+    """Put full-length runs made by the workers into an evaluator cache."""
+    key = effects_key(effects)
+    for t, sim in zip(trials, sims):
+        cache[(t.name, key)] = (t.n_samples, sim)
+
+
+def _worker_evaluators(state: TaskState, norms_cal: dict, norms_held: dict):
+    """The calibration and held-out evaluators of this worker (one simulation cache),
+    with the normalisation the parent fixed from the nominal model."""
+    def build():
+        simulate = state.simulator()
+        cache: dict = {}
+        units = [[Unit(state.trials[i], a, b, role) for i, a, b, role in spec]
+                 for spec in (state.cal, state.held)]
+        return tuple(Evaluator(state.experiment, simulate, u, state.config, cache, norms=n)
+                     for u, n in zip(units, (norms_cal, norms_held)))
+    return worker_cache(state, "evaluators", build)
+
+
+def task_simulate(state: TaskState, trial_index: int, effects: dict):
+    """Full-length run of one trial with ``effects`` (None when it diverges)."""
+    t = state.trials[trial_index]
+    simulate = worker_cache(state, "simulate", state.simulator)
+    return simulate(t, effects, t.n_samples)
+
+
+def _with_held_out(fit: EffectFit, ev_held: Evaluator, n0: int, n_dof: int) -> EffectFit:
+    fit.held_out_gap = ev_held.gap_value(fit.simulation_effects(n_dof))
+    fit.n_evaluations += ev_held.n_simulations - n0
+    return fit
+
+
+def task_fit_single(state: TaskState, name: str, norms_cal: dict, norms_held: dict):
+    """Fit one effect alone on the calibration units; its held-out gap."""
+    ev_cal, ev_held = _worker_evaluators(state, norms_cal, norms_held)
+    n_held = ev_held.n_simulations
+    params, gcal, nev, obj = fit_effect(name, ev_cal)
+    fit = EffectFit((name,), {name: jsonable(params)}, gcal, nev, objective=obj)
+    return _with_held_out(fit, ev_held, n_held, ev_cal.n_dof)
+
+
+def task_fit_second(state: TaskState, best: EffectFit, other: str, norms_cal: dict,
+                    norms_held: dict):
+    """The effect ``other`` fitted on top of the best single; its held-out gap."""
+    ev_cal, ev_held = _worker_evaluators(state, norms_cal, norms_held)
+    n_held = ev_held.n_simulations
+    fit = fit_second(best, other, ev_cal, ev_cal.n_dof)
+    return _with_held_out(fit, ev_held, n_held, ev_cal.n_dof)
+
+
+def task_refine_pair(state: TaskState, fit: EffectFit, norms_cal: dict, norms_held: dict):
+    """One more coordinate step on the best pair; its held-out gap."""
+    ev_cal, ev_held = _worker_evaluators(state, norms_cal, norms_held)
+    n_held = ev_held.n_simulations
+    refined = refine_pair(fit, ev_cal, ev_cal.n_dof)
+    if refined is fit:
+        return fit
+    return _with_held_out(refined, ev_held, n_held, ev_cal.n_dof)
