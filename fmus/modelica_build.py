@@ -159,6 +159,9 @@ def export(n: int = 2, *, python: str | None = None, use_cache: bool = True) -> 
         tmp.unlink(missing_ok=True)
         raise BuildError(f"exporting {MODELS[n]} failed: {proc.stderr.strip()}")
     os.replace(tmp, cached)
+    for old in CACHE_DIR.glob(f"{MODELS[n]}-*.json"):  # exports of older sources
+        if old != cached:
+            old.unlink(missing_ok=True)
     return json.loads(cached.read_text())
 
 
@@ -266,6 +269,25 @@ def _rigid_rhs(exported: dict) -> tuple[str, list[tuple[int, float]]]:
     return body, [(slots[k], v) for k, v in switches.items()]
 
 
+def rigid_active_states(rigid: str, exported: dict) -> list[int]:
+    """States whose derivative the rigid rhs can make nonzero: all but those assigned
+    ``SWITCH ? ... : 0.0`` with a switch that is 0 there (read from the C text; a state
+    not matched is kept)."""
+    import re
+
+    symbols = exported.get("symbols", {})
+    off = {symbols[k] for k, v in RIGID.items() if v == 0.0 and k in symbols}
+    active = []
+    for k in range(len(exported["states"])):
+        m = re.search(rf"^    dy\[{k}\] = ([A-Za-z0-9_]+);$", rigid, re.M)
+        if m:
+            a = re.search(rf"^    {re.escape(m.group(1))} = ([A-Za-z0-9_]+) \? .* : 0\.0;$", rigid, re.M)
+            if a and a.group(1) in off:
+                continue
+        active.append(k)
+    return active
+
+
 def _calls(text: str, fn: str):
     """(start, end, argument) of every call ``fn(...)`` in ``text`` (balanced parentheses)."""
     import re
@@ -279,14 +301,23 @@ def _calls(text: str, fn: str):
 
 
 def _rotated(body: str, slots: dict) -> str:
-    """``body`` with sin(a) and cos(a) replaced by md_sin/md_cos of a per-argument slot."""
-    out, pos = [], 0
+    """``body`` (one C function) with sin(a) and cos(a) taken from one md_sincos per distinct
+    argument a: the first use in a call evaluates it (into locals), the others reuse it (the
+    generated code assigns every variable once, so the same text is the same value)."""
+    out, pos, used = [], 0, []
     calls = sorted([(a, b, arg, fn) for fn in ("sin", "cos") for a, b, arg in _calls(body, fn)])
     for a, b, arg, fn in calls:
         k = slots.setdefault(arg, len(slots))
-        out += [body[pos:a], f"md_{fn}(w + MD_ROT_OFFSET + {4 * k}, {arg})"]
+        if k not in used:
+            used.append(k)
+        out += [body[pos:a], f"MD_{fn.upper()}({k}, {arg})"]
         pos = b
-    return "".join(out) + body[pos:]
+    text = "".join(out) + body[pos:]
+    if used:
+        brace = text.index("{") + 1
+        decl = "".join(f"\n    double md_s{k}, md_c{k}; int md_have{k} = 0;" for k in used)
+        text = text[:brace] + decl + text[brace:]
+    return text
 
 
 def _equations(exported: dict) -> tuple[str, str, list, int]:
@@ -304,27 +335,23 @@ _ROTATION = """/* sin and cos of an angle from an exact libm pair at a nearby re
    distinct argument, in the workspace): sin(r + d) = s_r cos d + c_r sin d with the Taylor
    series of cos d, sin d to d^6, exact to rounding for |d| <= 1e-4 rad (truncation below
    1e-28); a new exact reference when |d| > 1e-4.  What the C FMU does with its step-start
-   rotation; it replaces four sin/cos evaluations per RK4 step by polynomials. */
-static inline void md_rotate(double *slot, double a) {
+   rotation; it replaces four sin/cos evaluations per RK4 step by polynomials.  MD_SIN(k, a)
+   and MD_COS(k, a) evaluate the pair once per call of the function (locals md_s<k>, md_c<k>). */
+static inline void md_sincos(double *slot, double a, double *s, double *c) {
     double d = a - slot[0];
-    if (slot[3] == 0.0 || fabs(d) > 1e-4) {
+    if (slot[3] == 0.0 || !(fabs(d) <= 1e-4)) {
         slot[0] = a; slot[1] = sin(a); slot[2] = cos(a); slot[3] = 1.0;
+        *s = slot[1]; *c = slot[2];
+        return;
     }
-}
-static inline double md_sin(double *slot, double a) {
-    md_rotate(slot, a);
-    const double d = a - slot[0], d2 = d * d;
+    const double d2 = d * d;
     const double sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
     const double cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
-    return slot[1] * cd + slot[2] * sd;
+    *s = slot[1] * cd + slot[2] * sd;
+    *c = slot[2] * cd - slot[1] * sd;
 }
-static inline double md_cos(double *slot, double a) {
-    md_rotate(slot, a);
-    const double d = a - slot[0], d2 = d * d;
-    const double sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
-    const double cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
-    return slot[2] * cd - slot[1] * sd;
-}
+#define MD_SIN(k, a) (md_have##k ? md_s##k : (md_sincos(w + MD_ROT_OFFSET + 4 * (k), (a), &md_s##k, &md_c##k), md_have##k = 1, md_s##k))
+#define MD_COS(k, a) (md_have##k ? md_c##k : (md_sincos(w + MD_ROT_OFFSET + 4 * (k), (a), &md_s##k, &md_c##k), md_have##k = 1, md_c##k))
 """
 
 
@@ -334,8 +361,12 @@ def generated_c(exported: dict) -> str:
     c, rigid, select, nrot = _equations(exported)
     if rigid:
         test = " && ".join(f"p[{k}] == {v!r}" for k, v in select)
+        active = rigid_active_states(rigid, exported)
         fast = ["/* The rigid configuration's rhs: the generated rhs with its switches constant. */",
                 rigid, "#define HAVE_RHS_RIGID 1",
+                "/* the states it can change (the others keep their values: derivative 0) */",
+                f"#define N_RIGID_ACTIVE {len(active)}",
+                "static const int RIGID_ACTIVE[N_RIGID_ACTIVE] = {" + ", ".join(map(str, active)) + "};",
                 "static int md_is_rigid(const double *p) {", f"    return {test};", "}", ""]
     else:
         fast = ["#define HAVE_RHS_RIGID 0", ""]

@@ -68,13 +68,13 @@ equation
   robot.w = w_link;
   der(theta_link) = w_link;
   //   A der(w_link) = f,  A = M_r(q) + cuff_rigid M_h,
-  //   f = tau_link - c_r - G - cuff_rigid (B_h w_link + K_h theta_link) - (1 - cuff_rigid) tau_cuff,
+  //   f = tau_link - c_r - G - cuff_rigid (B_h w_link + K_h theta_link) - (compliant cuff: tau_cuff),
   // solved by the adjugate here (one division) rather than by the exporter's tearing
   for i in 1:3 loop
     f_link[i] = tau_link[i] - robot.c[i] - robot.G[i]
       - cuff_rigid*(arm.B_h[i, 1]*w_link[1] + arm.B_h[i, 2]*w_link[2] + arm.B_h[i, 3]*w_link[3]
                     + arm.K_h[i, 1]*theta_link[1] + arm.K_h[i, 2]*theta_link[2] + arm.K_h[i, 3]*theta_link[3])
-      - (1 - cuff_rigid)*interface_compliance.tau[i];
+      - (if interface_compliance.on then interface_compliance.tau[i] else 0);
     for k in 1:3 loop
       A_link[i, k] = robot.M[i, k] + cuff_rigid*arm.M_h[i, k];
     end for;
