@@ -204,7 +204,7 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
            "delayed velocity pathway through a 2nd-order activation, optionally half-wave "
            "rectified (parallel-cascade model, Kearney, Stein & Parameswaran 1997)",
            (_p("gain", "N m s/rad", (1.0, 5.0), (0.02, 60.0)),
-            _p("delay_s", "s", (0.03, 0.06), (0.005, 0.15), log=False, physical_low=True),
+            _p("delay_s", "s", (0.03, 0.06), (0.005, 0.15), log=False),  # 5 ms: no reflex
             _p("frequency_hz", "Hz", (2.5, 6.0), (0.5, 30.0))),
            fit="limbfit", kinds=("position",), choices={"rectified": (False, True)}),
     Effect("stiffness_amplitude",
