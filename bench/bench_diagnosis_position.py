@@ -9,7 +9,7 @@ Diagnoses, each alone (one 60 s, 1 kHz, one-joint recording per diagnosis, one p
   folder (GPL data: nothing is kept).
 
 Prints a table (verdict, named effect, fitted parameters with 95 % intervals, held-out
-reduction, wall time) and writes ``bench/results/diagnosis_position.json`` atomically,
+reduction, wall time) and writes ``bench/results/diagnosis_reklab.json`` atomically,
 with the machine's load average (timings on a loaded machine are upper bounds).
 
     python bench/bench_diagnosis_position.py            # about a minute on 2 idle cores
@@ -96,7 +96,7 @@ def main(argv=None) -> int:
     RESULTS.mkdir(exist_ok=True)
     out = {"rows": rows, "slowest_s": worst, "slowest_cpu_s": worst_cpu, "target_s": TARGET_S,
            "load_average_1min": load[0], "cores": os.cpu_count()}
-    tf.atomic_write(RESULTS / "diagnosis_position.json",
+    tf.atomic_write(RESULTS / "diagnosis_reklab.json",
                     lambda fh: fh.write(json.dumps(_clean(out), indent=2).encode()))
     return 0
 
