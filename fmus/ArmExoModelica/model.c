@@ -6,7 +6,7 @@
  * value), and sets the states to their start values.  model_advance: classical RK4 on
  * rhs(), or on rhs_rigid() (the same generated rhs with the effect switches constant, so
  * that the compiler drops what they switch off) when the parameters give the rigid
- * configuration.  model_calculateValues: observe() into the outputs (table OBS_OF_VR). */
+ * configuration, integrating only the states it can change (RIGID_ACTIVE).  model_calculateValues: observe() into the outputs (table OBS_OF_VR). */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
