@@ -12,7 +12,7 @@ Prints a table (verdict, named effect, fitted parameters with 95 % intervals, he
 reduction, wall time) and writes ``bench/results/diagnosis_reklab.json`` atomically,
 with the machine's load average (timings on a loaded machine are upper bounds).
 
-    python bench/bench_diagnosis_position.py            # about a minute on 2 idle cores
+    python bench/bench_diagnosis_reklab.py            # about a minute on 2 idle cores
 """
 
 from __future__ import annotations
