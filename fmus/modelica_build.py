@@ -355,10 +355,28 @@ static inline void md_sincos(double *slot, double a, double *s, double *c) {
 """
 
 
+def _pruned_observe(c: str, keep: set[int]) -> str:
+    """``c`` with observe() storing only the slots in ``keep`` (the FMU's outputs): the C
+    compiler then drops every computation that fed only the others."""
+    import re
+
+    start = c.index("void observe(")
+    end = c.index("\n}\n", start) + 3
+    body = c[start:end]
+    stores = re.findall(r"^    out\[(\d+)\] = [^;]*;$", body, re.M)
+    if not stores or not keep <= {int(k) for k in stores}:
+        raise BuildError("the generated observe() does not store every output slot as "
+                         "'out[k] = ...;': the exporter's output changed")
+    body = re.sub(r"^    out\[(\d+)\] = [^;]*;\n",
+                  lambda m: m.group(0) if int(m.group(1)) in keep else "", body, flags=re.M)
+    return c[:start] + body + c[end:]
+
+
 def generated_c(exported: dict) -> str:
     body = [f"    p[{k}] = {exported['parameters'][k]['c']};  /* {exported['parameters'][k]['name']} */"
             for k in exported["dependent_order"]]
     c, rigid, select, nrot = _equations(exported)
+    c = _pruned_observe(c, {x["slot"] for x in table(exported)["variables"] if x["causality"] == "output"})
     if rigid:
         test = " && ".join(f"p[{k}] == {v!r}" for k, v in select)
         active = rigid_active_states(rigid, exported)

@@ -46,6 +46,8 @@ def _element_name(base: str, idx) -> str:
 
 
 class Corrector:
+    """The correction over one flat model (``apply`` returns the corrected copy)."""
+
     def __init__(self, flat):
         self.flat = flat
         self.names = {v.name for v in flat.variables}
@@ -178,8 +180,6 @@ class Corrector:
                 continue
             where = f"{v.name} ({attr})"
             node = self.qualify(node, [scope] if scope else [], where)
-            if scope:  # the flattener qualifies unsubscripted array names: keep that scope
-                pass
             node = self.element(node, idx, where) if self._is_array(node) else node
             changes[attr] = node
         return dataclasses.replace(v, **changes) if changes else v
