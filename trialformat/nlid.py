@@ -303,8 +303,10 @@ def _metadata(path, name, props, settings, n, incr, start, names, columns) -> di
             "source": f"NLID nldat {path.name}:{name}"
                       + (f" ({comment})" if comment else "")
                       + f"; channels {_show(columns)}; domainStart {start:g} s"}
+    # a lab's ADC samples angle and torque together (log-format.md, torque_sampling)
+    meta["sensors"] = {"torque_sampling": "instantaneous"}
     if settings["torque_sign"] is not None:
-        meta["sensors"] = {"torque_sign": settings["torque_sign"]}
+        meta["sensors"]["torque_sign"] = settings["torque_sign"]
     for key, value in settings["meta"].items():
         if isinstance(value, dict) and isinstance(meta.get(key), dict):
             meta[key] = {**meta[key], **value}
