@@ -42,6 +42,7 @@ def main(argv=None) -> int:
     if not hasattr(args, "func"):
         parser.print_help()
         return 2
+    _plain_warnings()
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:
@@ -55,6 +56,18 @@ def main(argv=None) -> int:
         from trialformat.csvtable import printable
         print(f"armimp {args.command}: error: {printable(str(exc))}", file=sys.stderr)
         return 1
+
+
+def _plain_warnings() -> None:
+    """A library warning (metadata filled from defaults, few Welch segments) reaches the
+    terminal as one escaped line ``note: ...``, not with Python's source line."""
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        from trialformat.csvtable import printable
+        print(f"note: {printable(str(message))}", file=sys.stderr)
+
+    warnings.showwarning = show
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -413,8 +413,10 @@ def finish_trial(meta: dict, arrays: dict, name: str, filled: list, where, *,
     for s, value in _convention(meta, trial).items():
         setattr(trial, s, value)
     if filled:
-        warnings.warn(f"{Path(str(where)).name}: metadata keys absent, filled from the "
-                      f"reference configuration: {', '.join(filled)}", stacklevel=3)
+        source = ("the reference configuration" if trial.n_dof in REFERENCE_JOINTS else
+                  f"the documented {trial.n_dof}-joint defaults (log-format.md)")
+        warnings.warn(f"{Path(str(where)).name}: metadata keys absent, filled from "
+                      f"{source}: {', '.join(filled)}", stacklevel=3)
     return trial
 
 

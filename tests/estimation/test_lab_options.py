@@ -56,8 +56,8 @@ def test_filled_keys_are_one_plain_line(tmp_path, capsys):
     (tmp_path / "pos.json").write_text(json.dumps(meta))
     assert main(["estimate", str(tmp_path)]) == 0
     err = capsys.readouterr().err
-    assert err == ("note: pos.csv: metadata keys absent, filled from the reference "
-                   "configuration: fs\n")
+    assert err == ("note: pos.csv: metadata keys absent, filled from the documented "
+                   "1-joint defaults (log-format.md): fs\n")
 
 
 def test_missing_folder_says_so(tmp_path, capsys):

@@ -54,7 +54,7 @@ def two_objects(tmp_path, request):
 
 def test_one_trial_per_object(two_objects):
     path, (pos_a, tq_a), (pos_b, tq_b) = two_objects
-    with pytest.warns(UserWarning, match="filled from the reference"):
+    with pytest.warns(UserWarning, match="filled from the documented 1-joint defaults"):
         trials = tf.read_trials(path, min_samples=1000)
     assert [t.name for t in trials] == ["z_a", "z_b"]
     a, b = trials
