@@ -203,10 +203,14 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
     Effect("stretch_reflex",
            "delayed velocity pathway through a 2nd-order activation, optionally half-wave "
            "rectified (parallel-cascade model, Kearney, Stein & Parameswaran 1997)",
-           (_p("gain", "N m s/rad", (1.0, 5.0), (0.02, 60.0)),
+           # realistic: up to the ~30-40 N m s/rad, ~1.7 Hz of active ankle recordings
+           (_p("gain", "N m s/rad", (1.0, 40.0), (0.02, 300.0)),
             _p("delay_s", "s", (0.03, 0.06), (0.005, 0.15), log=False),  # 5 ms: no reflex
-            _p("frequency_hz", "Hz", (2.5, 6.0), (0.5, 30.0))),
-           fit="limbfit", kinds=("position",), choices={"rectified": (False, True)}),
+            _p("frequency_hz", "Hz", (1.0, 6.0), (0.5, 30.0))),
+           fit="limbfit", kinds=("position",),
+           # stretch_sign: which velocity stretches the reflexing muscle (acts only when
+           # rectified; limb.py): both are tried, as an ankle's angle sign is the lab's
+           choices={"rectified": (False, True), "stretch_sign": (1.0, -1.0)}),
     Effect("stiffness_amplitude",
            "stiffness softening with the running RMS amplitude, K (A / 0.01 rad)^-exponent",
            (_p("exponent", "-", (0.15, 0.5), (0.003, 3.0)),), fit="limbfit",

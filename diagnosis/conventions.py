@@ -173,6 +173,10 @@ def check_torque_sign(trials, arm, estimate) -> tuple[list, object, list]:
     torque was logged with the opposite sign. ``estimate(trials) -> ArmModel``."""
     if not np.all(np.diag(arm.K) < 0):
         return trials, arm, []
+    if not _low_frequency_opposed(arm):
+        # the fitted K is negative, but at the lowest frequencies torque follows the angle:
+        # the band's upper part pulled K down (a reflex's notch does so), not the sign
+        return trials, arm, []
     flipped = [_replace(t, scale={"tau_h": -1.0}, tau_h=-t.tau_h) for t in trials]
     arm_f = estimate(flipped)
     if not np.all(np.diag(arm_f.K) > 0):
@@ -181,3 +185,26 @@ def check_torque_sign(trials, arm, estimate) -> tuple[list, object, list]:
         "torque sign reversed", "tau_h, all trials",
         f"arm stiffness estimated {np.round(np.diag(arm.K), 3).tolist()} N m/rad (a "
         f"passive limb's is positive); {np.round(np.diag(arm_f.K), 3).tolist()} with -tau_h")]
+
+
+#: the lowest frequencies [Hz] where a passive joint's impedance is stiffness-like (phase
+#: near 0; a reversed torque sign puts it near 180 deg)
+LOW_FREQUENCY_HZ = 1.5
+
+
+def _low_frequency_opposed(arm) -> bool:
+    """True when, below LOW_FREQUENCY_HZ, every diagonal Z_kk has its phase beyond 90 deg
+    (median cosine < 0); True also when the arm carries no FRF to look at."""
+    if getattr(arm, "Z", None) is None or getattr(arm, "f", None) is None:
+        return True
+    f, Z = np.asarray(arm.f), np.asarray(arm.Z)
+    sel = (f > 0) & (f <= LOW_FREQUENCY_HZ)
+    if not sel.any() or Z.ndim != 3:
+        return True
+    for k in range(Z.shape[1]):
+        z = Z[sel, k, k]
+        z = z[np.abs(z) > 0]
+        if z.size and np.median(z.real / np.abs(z)) >= 0:
+            return False
+    return True
+

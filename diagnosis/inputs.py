@@ -29,7 +29,10 @@ HIDDEN_KEYS = ("simulation",)
 def trial_paths(source) -> list[Path]:
     """The ``NAME.csv`` / ``NAME.mat`` paths of a folder (or a list of paths), truth
     files excluded."""
-    if isinstance(source, (str, os.PathLike)) and Path(source).is_file() and \
+    from trialformat.matlab import split_variable
+    if isinstance(source, (str, os.PathLike)) and split_variable(source)[1] is not None:
+        paths = [Path(source)]  # FILE.mat:VAR, one recording of a file of several
+    elif isinstance(source, (str, os.PathLike)) and Path(source).is_file() and \
             str(source).lower().endswith((".csv", ".csv.gz", ".mat")):
         paths = [Path(source)]
     elif isinstance(source, (str, os.PathLike)):

@@ -585,6 +585,8 @@ def fit_effect(preps, name: str, nominal: dict, cfg: FitConfig = FitConfig(), *,
     effect = cat.get_effect(name)
     choices = [dict(zip(effect.choices, combo)) for combo in
                _product(*effect.choices.values())] if effect.choices else [{}]
+    # a stretch direction means nothing without rectification (limb.py): try it once
+    choices = [c for c in choices if c.get("rectified", True) or c.get("stretch_sign", 1.0) > 0]
     best = None
     n_eval = 0
     for fixed in choices:

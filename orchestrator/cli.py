@@ -64,6 +64,8 @@ def _plain_warnings() -> None:
     import warnings
 
     def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, (DeprecationWarning, FutureWarning)):
+            return  # a library's notice to its own callers (mat-io on pandas), not the user's
         from trialformat.csvtable import printable
         print(f"note: {printable(str(message))}", file=sys.stderr)
 

@@ -80,3 +80,12 @@ def test_the_five_recordings_together_and_each_alone(tmp_path):
                          progress=False)
         _check(alone, name)
         assert alone.verdict == result.reports[name].verdict
+
+
+@needs_data
+def test_one_recording_of_the_file_by_name():
+    """``FILE.mat:VAR`` names one recording, as for ``estimate`` and ``figures``."""
+    from diagnosis.inputs import load_trials
+    trials = load_trials(f"{MAT}:z_pf2")
+    assert [t.name for t in trials] == ["z_pf2"]
+    assert trials[0].meta["perturbation"]["kind"] == "position"
