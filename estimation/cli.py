@@ -140,10 +140,29 @@ def _read(sources, options):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         for s in sources:
-            trials += tf.read_trials(s, min_samples=options.nperseg)
+            got = tf.read_trials(s, min_samples=options.nperseg)
+            for t in got:
+                t.source_arg = s
+            trials += got
+    _unique_names(trials)
     for w in caught:
         print(f"note: {tf.csvtable.printable(str(w.message))}", file=sys.stderr)
     return trials
+
+
+def _unique_names(trials) -> None:
+    """Recordings of the same name from two sources (``a/rec`` and ``b/rec``, or two
+    ``.mat`` files holding ``z_pf``) get the source as prefix, ``SOURCE:NAME``, so that
+    their results and report files stay apart; the same recording given twice is refused."""
+    names = [t.name for t in trials]
+    for t in trials:
+        if names.count(t.name) > 1:
+            t.name = f"{Path(t.source_arg).name}:{t.name}"
+    names = [t.name for t in trials]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"recording(s) {twice} given twice (the same file named more than "
+                         f"once); give each once")
 
 
 def lab_results(trials, options, truth_name="none", failures=None):
@@ -197,21 +216,22 @@ def run_estimate(args) -> int:
 
 
 def _check_json_out(path: Path) -> None:
-    """Refuse a ``--json`` that would overwrite a trial's metadata or a folder."""
+    """Refuse a ``--json`` that would overwrite anything but an earlier ``--json`` results
+    file: a folder, a trial (``.csv``, ``.csv.gz``, ``.mat``, its metadata), any other file."""
     if path.is_dir():
         raise tf.OutputError(f"--json {path}: is a folder; give a file name "
                              f"(e.g. {path / 'results.json'})")
     if path.is_file():
         try:
             doc = json.loads(path.read_text(encoding="utf-8-sig"))
-        except (ValueError, UnicodeDecodeError):
+        except (ValueError, UnicodeDecodeError, OSError):
             doc = None
-        if isinstance(doc, dict) and "n_dof" in doc or (
-                isinstance(doc, dict) and str(doc.get("format", "")).startswith(
-                    "arm-impedance-trial")):
-            raise tf.OutputError(f"--json {path}: is a trial's metadata (it would be "
-                                 f"replaced by the results); give another file name")
-
+        ours = isinstance(doc, list) and all(
+            isinstance(d, dict) and "condition" in d and "method" in d for d in doc)
+        if not ours:
+            raise tf.OutputError(f"--json {path}: exists and is not an earlier results file "
+                                 f"of 'estimate --json' (a trial, its metadata or another "
+                                 f"file would be replaced); give a new file name")
 
 def describe(r) -> str:
     """Text of one result: set-up line, one line per element, the warnings."""
@@ -258,7 +278,7 @@ def _paper_kind(trials) -> bool:
 def run_figures(args) -> int:
     options = options_from(args)
     # refused before any reading: a report replaces only its own earlier report
-    tf.logs.check_report_out(args.out, args.folders)
+    tf.logs.check_report_out(args.out, args.folders, kinds=("lab", "paper"))
     trials = _read(args.folders, options)
     kind, status = args.kind, 0
     if kind == "auto":

@@ -128,7 +128,7 @@ def make_report(folders, out, *, truth="table1", variant=RECOMMENDED, compare=PA
     out = Path(out)
     arm = ref.arm_matrices(_TRUTH_ARMS[truth]) if truth in _TRUTH_ARMS else None
     folders = [folders] if isinstance(folders, (str, os.PathLike)) else list(folders)
-    tf.logs.check_report_out(out, folders)  # before any work: never over an input
+    tf.logs.check_report_out(out, folders, kinds=("lab", "paper"))  # never over an input
     paths = trial_paths(folders)
     tasks = _condition_tasks(paths, arm, variants)
     pool = _pool(workers, len(tasks))

@@ -250,7 +250,7 @@ def with_ending(stem: str | os.PathLike, ending: str) -> Path:
     return stem.with_name(stem.name + ending)
 
 
-def check_report_out(out: str | os.PathLike, inputs=()) -> None:
+def check_report_out(out: str | os.PathLike, inputs=(), kinds=None) -> None:
     """Refuse a report folder ``out`` that would replace what this project did not write.
 
     Refused: an existing file; a folder that is, or holds, one of ``inputs`` (files or
@@ -276,7 +276,17 @@ def check_report_out(out: str | os.PathLike, inputs=()) -> None:
             raise OutputError(f"--out {out}: is or holds the input {source}; a report "
                               f"replaces its folder, so it must not hold the trials: give "
                               f"a folder outside the inputs (e.g. {out.name}_report)")
-    if out.is_dir() and not (out / REPORT_MARK).is_file() and not _earlier_report(out) \
+    mark = out / REPORT_MARK
+    if kinds is not None and mark.is_file():
+        try:
+            kind = json.loads(mark.read_text(encoding="utf-8")).get("kind")
+        except (ValueError, UnicodeDecodeError, OSError, AttributeError):
+            kind = None
+        if kind not in kinds:
+            raise OutputError(f"--out {out}: holds a {kind or 'different'} report of this "
+                              f"project, not a {' or '.join(kinds)} report; it is left as "
+                              f"it is: give a new folder (e.g. {out.name}_{kinds[0]})")
+    if out.is_dir() and not mark.is_file() and not _earlier_report(out) \
             and any(out.iterdir()):
         raise OutputError(f"--out {out}: folder is not empty and is not a report of this "
                           f"project (no {REPORT_MARK}); it is left as it is: give a new or "

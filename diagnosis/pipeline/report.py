@@ -95,13 +95,26 @@ def check_out_dir(out_dir, source) -> None:
                     f"would replace the measured trials; choose another folder")
         except OSError:
             pass
-    if out.is_dir():
+    if out.is_dir() and not _diagnosis_folder(out, depth=1):
         names = {p.name for p in out.iterdir()}
-        if names and "report.json" not in names and names != {CACHE_DIR}:
+        if names:
             raise DiagnosisInputError(
                 f"--out {out}: the folder exists and holds files that are not a diagnosis "
                 f"report ({', '.join(sorted(names)[:5])}{' ...' if len(names) > 5 else ''}); "
                 f"it would be replaced: choose a new or an earlier report folder")
+
+
+def _diagnosis_folder(folder: Path, depth: int) -> bool:
+    """An earlier diagnosis report (``report.json``), a killed run's resume store, or
+    (``depth`` 1) a folder of such per-condition reports, as a killed diagnosis of several
+    conditions leaves it: one that a re-run may replace."""
+    names = {p.name for p in folder.iterdir()}
+    if not names or "report.json" in names or names == {CACHE_DIR}:
+        return True
+    if depth <= 0:
+        return False
+    return all(p.is_dir() and (p.name.startswith(".") or _diagnosis_folder(p, depth - 1))
+               for p in folder.iterdir())
 
 
 def write_atomically(report, out_dir, resume=None) -> Path:
@@ -119,7 +132,7 @@ def write_atomically(report, out_dir, resume=None) -> Path:
             resume.keep_only_current()
             if resume.root.is_dir():
                 os.replace(resume.root, tmp / CACHE_DIR)
-        tf.replace_dir(tmp, out)
+        tf.replace_dir(tmp, out, kind="diagnosis")
     except BaseException:
         import shutil
         if (tmp / CACHE_DIR).is_dir() and resume is not None and not resume.root.exists():

@@ -89,3 +89,19 @@ def test_one_recording_of_the_file_by_name():
     trials = load_trials(f"{MAT}:z_pf2")
     assert [t.name for t in trials] == ["z_pf2"]
     assert trials[0].meta["perturbation"]["kind"] == "position"
+
+
+def test_a_killed_multi_condition_run_may_be_resumed(tmp_path):
+    """The out folder a killed diagnosis of several conditions leaves (one finished
+    report, one resume store) is accepted by a re-run; a folder of the user's is not."""
+    from diagnosis.errors import DiagnosisInputError
+    from diagnosis.pipeline.report import check_out_dir
+    from diagnosis.pipeline.resume import CACHE_DIR
+    out = tmp_path / "out"
+    (out / "z_df").mkdir(parents=True)
+    (out / "z_df" / "report.json").write_text("{}")
+    (out / "z_pf" / CACHE_DIR).mkdir(parents=True)
+    check_out_dir(out, tmp_path / "in")
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(DiagnosisInputError, match="not a diagnosis"):
+        check_out_dir(out, tmp_path / "in")
