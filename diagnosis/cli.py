@@ -58,6 +58,10 @@ def _effects(text):
     if not text:
         return tuple(cat.CATALOGUE)  # the experiment keeps those that apply to it
     names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise ValueError(f"--effects {text!r}: names no effect; give catalogue names "
+                         f"separated by commas (e.g. stretch_reflex,channel_delay) or leave "
+                         f"it out for all")
     for n in names:
         cat.get_effect(n)
     return names

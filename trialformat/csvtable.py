@@ -108,6 +108,9 @@ def read_columns(path: Path, header: list[str], delimiter: str,
         if "Empty CSV file" in str(exc):
             return {name: np.empty(0) for name in numeric}, {}
         _locate_error(path, header, delimiter, numeric, exc)
+    except OSError as exc:  # pyarrow's decompression: a damaged or cut .gz
+        raise TrialFormatError(f"{path}: cannot be read ({exc}); a .gz trial must be one "
+                               f"whole gzip stream: recompress it") from None
     declared = {name: _as_float(table.column(keys[index[name]])) for name in numeric}
     extra = {}
     for name, key in zip(header, keys):

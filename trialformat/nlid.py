@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import MatFileError
-from .logs import FORMAT, MIN_SAMPLES, SIGNALS, complete_metadata, finish_trial
+from .logs import FORMAT, MAX_DOF, MIN_SAMPLES, SIGNALS, complete_metadata, finish_trial
 
 NLDAT = "nldat"
 TARGETS = SIGNALS + ("theta_ref",)
@@ -275,10 +275,10 @@ def _map_channels(names, settings, where) -> dict:
             if target is None:
                 continue
             m = _TARGET.match(str(target))
-            if not m or int(m.group(2)) < 1:
+            if not m or not 1 <= int(m.group(2)) <= MAX_DOF:
                 raise MatFileError(f"{settings['where']}: key 'channels.{c}' must be one "
-                                   f"of {', '.join(s + '[j]' for s in TARGETS)} (j >= 1) or "
-                                   f"null, got {target!r}")
+                                   f"of {', '.join(s + '[j]' for s in TARGETS)} (1 <= j <= "
+                                   f"{MAX_DOF}) or null, got {target!r}")
             out[c] = (m.group(1), int(m.group(2)))
             continue
         for signal, pattern in _DEFAULT_NAMES.items():

@@ -57,3 +57,21 @@ def test_same_name_from_two_sources_keeps_both(tmp_path):
 def test_the_same_recording_twice_is_refused(folder, capsys):
     assert main(["estimate", str(folder), str(folder)]) == 1
     assert "given twice" in capsys.readouterr().err
+
+
+def test_a_cut_gzip_trial_is_refused_naming_the_file(tmp_path, capsys):
+    import gzip
+    tf.write_trial(tmp_path / "a", position_trial(**ANKLE, seed=1, duration_s=20.0))
+    data = (tmp_path / "a.csv").read_bytes()
+    (tmp_path / "a.csv").unlink()
+    (tmp_path / "a.csv.gz").write_bytes(gzip.compress(data)[:50_000])
+    assert main(["estimate", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert "a.csv.gz" in err and "gzip" in err
+
+
+def test_an_empty_effect_list_is_refused(tmp_path, capsys):
+    from orchestrator.cli import main as armimp
+    assert armimp(["diagnose", str(tmp_path), "--out", str(tmp_path / "o"),
+                   "--effects", ","]) == 1
+    assert "names no effect" in capsys.readouterr().err
