@@ -226,6 +226,10 @@ def _check_json_out(path: Path) -> None:
             doc = json.loads(path.read_text(encoding="utf-8-sig"))
         except (ValueError, UnicodeDecodeError, OSError):
             doc = None
+        if isinstance(doc, dict) and ("n_dof" in doc or str(doc.get("format", "")).startswith(
+                "arm-impedance-trial")):
+            raise tf.OutputError(f"--json {path}: is a trial's metadata (it would be "
+                                 f"replaced by the results); give another file name")
         ours = isinstance(doc, list) and all(
             isinstance(d, dict) and "condition" in d and "method" in d for d in doc)
         if not ours:

@@ -281,9 +281,9 @@ def check_report_out(out: str | os.PathLike, inputs=(), kinds=None) -> None:
         try:
             kind = json.loads(mark.read_text(encoding="utf-8")).get("kind")
         except (ValueError, UnicodeDecodeError, OSError, AttributeError):
-            kind = None
-        if kind not in kinds:
-            raise OutputError(f"--out {out}: holds a {kind or 'different'} report of this "
+            kind = None  # unreadable: judged as an unmarked folder below
+        if kind is not None and kind not in kinds:  # a marker without kind: any report
+            raise OutputError(f"--out {out}: holds a {kind} report of this "
                               f"project, not a {' or '.join(kinds)} report; it is left as "
                               f"it is: give a new folder (e.g. {out.name}_{kinds[0]})")
     if out.is_dir() and not mark.is_file() and not _earlier_report(out) \
