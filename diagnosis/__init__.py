@@ -44,16 +44,6 @@ __all__ = ["CATALOGUE", "catalogue_table", "expand_effect", "get_effect", "VERDI
            "make_normaliser", "set_gap", "z_scores"]
 
 
-def __getattr__(name):
-    """Load the submodule of a public name on first use (PEP 562), so that importing the
-    package (``python -m diagnosis``, the CLI's --help) loads no numpy, scipy or FMU code."""
-    if name in _EXPORTS:
-        from importlib import import_module
-        value = getattr(import_module(_EXPORTS[name], __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+from trialformat.firstuse import first_use  # noqa: E402
 
-
-def __dir__():
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = first_use(__name__, globals(), _EXPORTS)

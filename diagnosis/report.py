@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -77,17 +75,8 @@ def write_report(report, out_dir) -> Path:
 
 def _atomic_text(path: Path, text: str) -> None:
     """Write through a temporary file and rename; the file gets the user's umask."""
-    from trialformat.logs import current_umask
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.chmod(tmp, 0o666 & ~current_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    from trialformat.logs import atomic_write
+    atomic_write(path, lambda fh: fh.write(text.encode("utf-8")))
 
 
 def _clean(obj):

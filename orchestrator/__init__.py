@@ -44,16 +44,6 @@ __all__ = ["Setup", "simulate_trial", "make_perturbation", "Plant", "run_grid", 
            "trial_name", "check_contract", "default_fmu_path", "get_plant", "simulate_plant"]
 
 
-def __getattr__(name):
-    """Load the submodule of a public name on first use (PEP 562), so that importing the
-    package (``python -m orchestrator``, the CLI's --help) loads no numpy, scipy or FMU code."""
-    if name in _EXPORTS:
-        from importlib import import_module
-        value = getattr(import_module(_EXPORTS[name], __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+from trialformat.firstuse import first_use  # noqa: E402
 
-
-def __dir__():
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = first_use(__name__, globals(), _EXPORTS)

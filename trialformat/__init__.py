@@ -19,20 +19,12 @@ _EXPORTS = {
     "is_mat": ".matlab", "read_trial_mat": ".matlab", "read_trials_mat": ".matlab",
     "write_trial_mat": ".matlab",
 }
-_SUBMODULES = ("cliargs", "csvtable", "errors", "logs", "matlab", "nlid", "processes",
-               "reference", "tempdirs")
+_SUBMODULES = ("cliargs", "csvtable", "errors", "firstuse", "logs", "matlab", "nlid",
+               "processes", "reference", "tempdirs")
 
 __all__ = ["reference", *_EXPORTS]
 
 
-def __getattr__(name):
-    """Load a public name's submodule on first use (PEP 562)."""
-    from importlib import import_module
-    if name in _EXPORTS:
-        value = getattr(import_module(_EXPORTS[name], __name__), name)
-    elif name in _SUBMODULES:
-        value = import_module("." + name, __name__)
-    else:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    globals()[name] = value
-    return value
+from .firstuse import first_use  # noqa: E402
+
+__getattr__, __dir__ = first_use(__name__, globals(), _EXPORTS, _SUBMODULES)
