@@ -130,7 +130,6 @@ def build_fmu(out_dir: str | os.PathLike | None = None, *, cc: str | None = None
     out_dir = Path(out_dir) if out_dir is not None else BUILD_DIR
     out_dir.mkdir(parents=True, exist_ok=True)
     cc = cc or os.environ.get("CC", "cc")
-    plat, ext = _platform(fmi_version)
     name, identifier = fmu_name(fmi_version, n), model_name(n)
     description = MODEL_DIR / ("modelDescription.xml" if fmi_version == 2 else "modelDescription3.xml")
     if n != 2:
@@ -149,25 +148,41 @@ def build_fmu(out_dir: str | os.PathLike | None = None, *, cc: str | None = None
             (src / f"{identifier}_all.c").write_text(
                 f"/* The {n}-link plant: ArmExoPlant_all.c with N_JOINTS = {n}. */\n"
                 f"#define N_JOINTS {n}\n#include \"{MODEL_NAME}_all.c\"\n")
-        lib = Path(tmp) / f"{identifier}{ext}"
-        cmd = [cc, *CFLAGS, f"-DFMI_VERSION={fmi_version}", "-I", str(src), "-o", str(lib),
-               str(src / f"{identifier}_all.c"), "-lm"]
-        try:
-            proc = subprocess.run(cmd, capture_output=True, text=True)
-        except FileNotFoundError as exc:
-            raise BuildError(f"C compiler {cc!r} not found; install a C compiler or set CC") from exc
-        if proc.returncode != 0:
-            raise BuildError(f"compiling the FMU failed ({' '.join(cmd)}):\n{proc.stderr}")
-        tmp_fmu = out_dir / f".{name}.{os.getpid()}.tmp"
-        with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
-            z.write(description, "modelDescription.xml")
-            z.write(lib, f"binaries/{plat}/{identifier}{ext}")
-            for f in sorted(src.iterdir()):
-                z.write(f, f"sources/{f.name}")
-            z.write(MODEL_DIR / "readme.md", "documentation/readme.md")
-        os.replace(tmp_fmu, out_dir / name)  # atomic: readers never see half an FMU
+        pack_fmu(cc, CFLAGS, fmi_version, src, identifier, description, out_dir / name,
+                 (MODEL_DIR / "readme.md").read_text(encoding="utf-8"))
     return out_dir / name
 
+
+
+def pack_fmu(cc, cflags, fmi_version, src, identifier, description, fmu, readme):
+    """Compile ``src/IDENTIFIER_all.c`` into the platform binary and zip it with the model
+    description, the sources and ``readme`` (text) as ``fmu``, atomically: readers never see
+    half an FMU.
+
+    Raises
+    ------
+    BuildError
+        The compiler is missing or failed (the command and its last output named).
+    """
+    fmu = Path(fmu)
+    plat, ext = _platform(fmi_version)
+    lib = Path(src).parent / f"{identifier}{ext}"
+    cmd = [cc, *cflags, f"-DFMI_VERSION={fmi_version}", "-I", str(src), "-o", str(lib),
+           str(Path(src) / f"{identifier}_all.c"), "-lm"]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+    except FileNotFoundError as exc:
+        raise BuildError(f"C compiler {cc!r} not found; install a C compiler or set CC") from exc
+    if proc.returncode != 0:
+        raise BuildError(f"compiling {fmu.name} failed ({' '.join(cmd)}):\n{proc.stderr[-4000:]}")
+    tmp_fmu = fmu.with_name(f".{fmu.name}.{os.getpid()}.tmp")
+    with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
+        z.write(description, "modelDescription.xml")
+        z.write(lib, f"binaries/{plat}/{identifier}{ext}")
+        for f in sorted(Path(src).iterdir()):
+            z.write(f, f"sources/{f.name}")
+        z.writestr("documentation/readme.md", readme)
+    os.replace(tmp_fmu, fmu)
 
 def default_fmu_path(build_if_missing: bool = True, *, fmi_version: int = 2, n: int = 2) -> Path:
     """Path of ``fmus/build/ArmExoPlant.fmu`` (FMI 2.0) or ``ArmExoPlant_fmi3.fmu`` (FMI 3.0),

@@ -28,11 +28,11 @@ import subprocess
 import sys
 import tempfile
 import uuid
-import zipfile
 from pathlib import Path
 from xml.sax.saxutils import escape
 
-from .build import BUILD_DIR, CFLAGS, FMI_HEADERS, FRAMEWORK_DIR, BuildError, _fmi_header_dir, _platform
+from .build import (BUILD_DIR, CFLAGS, FMI_HEADERS, FRAMEWORK_DIR, BuildError, _fmi_header_dir,
+                    pack_fmu)
 from .variables import UNITS
 
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -512,7 +512,6 @@ def build_fmu(out_dir=None, *, cc: str | None = None, fmi_version: int = 2, n: i
     out_dir = Path(out_dir) if out_dir is not None else BUILD_DIR
     out_dir.mkdir(parents=True, exist_ok=True)
     cc = cc or os.environ.get("CC", "cc")
-    plat, ext = _platform(fmi_version)
     ident, name = identifier(n), fmu_name(fmi_version, n)
     t = table(exported)
     with tempfile.TemporaryDirectory(prefix="armexo-modelica-") as tmp:
@@ -531,25 +530,10 @@ def build_fmu(out_dir=None, *, cc: str | None = None, fmi_version: int = 2, n: i
             (src / "buildDescription.xml").write_text(_BUILD_DESCRIPTION.format(ident=ident))
         description = Path(tmp) / "modelDescription.xml"
         description.write_text(model_description_text(exported, t, ident, fmi_version))
-        lib = Path(tmp) / f"{ident}{ext}"
-        cmd = [cc, *[f for f in CFLAGS if f != "-Wextra"], f"-DFMI_VERSION={fmi_version}", "-I", str(src),
-               "-o", str(lib), str(src / f"{ident}_all.c"), "-lm"]
-        try:
-            proc = subprocess.run(cmd, capture_output=True, text=True)
-        except FileNotFoundError as exc:
-            raise BuildError(f"C compiler {cc!r} not found; install a C compiler or set CC") from exc
-        if proc.returncode != 0:
-            raise BuildError(f"compiling the exported FMU failed ({' '.join(cmd)}):\n{proc.stderr[-4000:]}")
-        tmp_fmu = out_dir / f".{name}.{os.getpid()}.tmp"
-        with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
-            z.write(description, "modelDescription.xml")
-            z.write(lib, f"binaries/{plat}/{ident}{ext}")
-            for f in sorted(src.iterdir()):
-                z.write(f, f"sources/{f.name}")
-            z.writestr("documentation/readme.md",
-                       f"# {exported['model']}\n\nExported from the Modelica package modelica/ArmExo by "
-                       f"modelica {EXPORTER_VERSION} (fmus/modelica_build.py); see docs/plant.md.\n")
-        os.replace(tmp_fmu, out_dir / name)
+        pack_fmu(cc, [f for f in CFLAGS if f != "-Wextra"], fmi_version, src, ident,
+                 description, out_dir / name,
+                 f"# {exported['model']}\n\nExported from the Modelica package modelica/ArmExo "
+                 f"by modelica {EXPORTER_VERSION} (fmus/modelica_build.py); see docs/plant.md.\n")
     return out_dir / name
 
 
