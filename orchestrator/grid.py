@@ -189,9 +189,7 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
         bar.close()
     for t in todo:
         if t["name"] not in results:
-            results[t["name"]] = {**{k: v for k, v in t.items() if k != "fmu_path"},
-                                  "status": "interrupted"}
-            _remove_partial(out, t["name"])
+            results[t["name"]] = _unreported(out, t)
     manifest = _manifest(tasks, results, grid_options, time.perf_counter() - start)
     _write_json(out / MANIFEST, manifest)
     _write_json(out / FAILURES, {"failures": [r for r in manifest["trials"]
@@ -203,12 +201,27 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
     return manifest
 
 
+def _unreported(out: Path, task: dict) -> dict:
+    """The manifest entry of a trial whose result never reached this process (Ctrl-C).
+
+    A worker ignores SIGINT, so it may finish writing its trial between the Ctrl-C and its
+    termination: a trial whose both files are there (the JSON is written last) is done;
+    anything else of it is removed, so that "interrupted" always means "absent"."""
+    entry = {k: v for k, v in task.items() if k != "fmu_path"}
+    if trial_exists(out / task["name"]):
+        return {**entry, "status": "done", "note": "finished as the run was interrupted"}
+    _remove_partial(out, task["name"])
+    return {**entry, "status": "interrupted"}
+
+
 def _remove_partial(out: Path, name: str) -> None:
-    """Remove the temporary files of a trial whose worker was stopped while writing it
-    (``.NAME.csv.*.tmp``, ``.NAME.json.*.tmp`` of the atomic writes)."""
-    for tmp in out.glob(f".{glob.escape(name)}.*.tmp"):
+    """Remove what a stopped worker left of a trial: the temporary files of the atomic
+    writes (``.NAME.csv.*.tmp``, ``.NAME.json.*.tmp``) and a CSV without its JSON."""
+    partial = list(out.glob(f".{glob.escape(name)}.*.tmp"))
+    partial += [out / f"{name}{ending}" for ending in (".csv", ".csv.gz")]
+    for path in partial:
         try:
-            tmp.unlink()
+            path.unlink()
         except OSError:
             pass
 

@@ -104,6 +104,11 @@ def stop_pool(ex) -> None:
                 p.join(1.0)
         except (OSError, ValueError, AssertionError, AttributeError):
             pass
+    # the executor's manager thread marks the futures of the killed tasks broken: wait for
+    # it, so that on return no future is left running
+    manager = getattr(ex, "_executor_manager_thread", None)
+    if manager is not None and manager.is_alive():
+        manager.join(TERMINATE_GRACE_S)
 
 
 @contextmanager

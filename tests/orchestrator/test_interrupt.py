@@ -185,7 +185,7 @@ def test_stopping_a_pool_cancels_pending_tasks_and_terminates_running_ones():
             start = time.monotonic()
             raise KeyboardInterrupt
     assert time.monotonic() - start < 5.0
-    assert all(f.cancelled() or f.done() for f in futures)
+    assert [f for f in futures if not (f.cancelled() or f.done())] == []
     assert _alive(set(procs) | pids) == set()
 
 
@@ -203,3 +203,21 @@ def test_stale_temporary_folders_of_dead_processes_are_removed(tmp_path):
     assert not stale.exists() and living.exists() and other.exists() and made.exists()
     workers.release_temp_dir(made)
     assert not made.exists()
+
+
+def test_a_trial_written_as_the_grid_stopped_is_done_and_a_half_written_one_is_removed(tmp_path):
+    """Workers ignore SIGINT, so one may finish its trial between Ctrl-C and its end: the
+    manifest must then say done (both files there), and interrupted must mean absent."""
+    from orchestrator.grid import _unreported
+
+    task = {"name": "fric0_res0_pert3_dof1", "fmu_path": "x.fmu", "seed": 1}
+    (tmp_path / f"{task['name']}.csv").write_text("t\n0\n")
+    (tmp_path / f"{task['name']}.json").write_text("{}")
+    done = _unreported(tmp_path, task)
+    assert done["status"] == "done" and "fmu_path" not in done
+    half = {**task, "name": "fric3_res0_pert3_dof1"}
+    (tmp_path / f"{half['name']}.csv").write_text("t\n0\n")  # killed before its JSON
+    (tmp_path / f".{half['name']}.json.123.tmp").write_text("{")
+    assert _unreported(tmp_path, half)["status"] == "interrupted"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"{task['name']}.csv",
+                                                          f"{task['name']}.json"]
