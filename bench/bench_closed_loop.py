@@ -11,7 +11,6 @@ each is the median of ``--repeat`` runs.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import tempfile
@@ -25,6 +24,8 @@ from scipy.signal import csd, welch
 from orchestrator import Setup, get_plant, run_grid, simulate_trial
 from orchestrator.trial import default_fmu_path, simulate_plant
 from trialformat import reference, write_trial
+
+from benchio import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results" / "closed_loop.json"
 TARGET_RATIO, TARGET_GRID_S = 1.3, 120.0
@@ -160,11 +161,7 @@ def main(argv=None):
                        grid_done=manifest["n_done"], grid_failed=manifest["n_failed"],
                        target_grid_s=TARGET_GRID_S)
     print_table(res)
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    tmp = RESULTS.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(res, indent=2))
-    os.replace(tmp, RESULTS)
-    print(f"wrote {RESULTS.relative_to(Path.cwd()) if RESULTS.is_relative_to(Path.cwd()) else RESULTS.name}")
+    write_results(RESULTS.stem, res, indent=2)
 
 
 def print_table(r):

@@ -19,13 +19,13 @@ Usage: ``python bench/bench_coverage.py [SEEDS]`` (default 200; ~3 min on 2 core
 Prints a table and writes bench/results/coverage.json.
 """
 
-import json
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
 import numpy as np
+
+from benchio import write_results
 
 ANKLE = {"K": 150.0, "B": 1.5, "I": 0.015}
 ANKLE_CTRL = {"M_rd": [0.005], "B_rd": [0.5], "K_rd": [10.0], "theta_rd_deg": [0.0],
@@ -75,9 +75,8 @@ def main(argv=None):
         for p, v in row.items():
             print(f"{case:16s} {p:5s} {100 * v['coverage']:8.1f}% {v['bias_pct']:+8.3f} "
                   f"{v['sd_pct']:7.3f} {v['width_over_scatter']:14.2f}")
-    out = Path(__file__).parent / "results" / "coverage.json"
-    out.write_text(json.dumps({"seeds": seeds, "truth": truth, "wall_s": wall,
-                               "cases": table}, indent=1))
+    write_results("coverage", {"seeds": seeds, "truth": truth, "wall_s": wall,
+                               "cases": table})
     return 0
 
 

@@ -6,7 +6,6 @@ package's scipy simulation written to a temporary folder. Prints a table and wri
 bench/results/estimation.json.
 """
 
-import json
 import platform
 import sys
 import tempfile
@@ -19,6 +18,8 @@ import trialformat as tf
 from estimation import (estimate_impedance, fit_impedance, fit_second_order, left_limit_delay,
                         read_trials, write_trial_mat)
 from estimation.synthetic import synthetic_condition
+
+from benchio import write_results
 
 REPEATS = 5
 
@@ -64,12 +65,7 @@ def main(argv=None):
     result = {"source": source, "python": platform.python_version(),
               "machine": platform.machine(), "repeats": REPEATS,
               "seconds": {k: {"best": v[0], "median": v[1]} for k, v in rows.items()}}
-    out = Path(__file__).with_name("results") / "estimation.json"
-    out.parent.mkdir(exist_ok=True)
-    tmp_out = out.with_suffix(".json.tmp")
-    tmp_out.write_text(json.dumps(result, indent=1))
-    tmp_out.replace(out)
-    print(f"wrote {out.relative_to(Path(__file__).parents[1])}")
+    write_results("estimation", result)
 
 
 if __name__ == "__main__":

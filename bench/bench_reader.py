@@ -23,6 +23,8 @@ import pandas as pd
 
 import trialformat as tf
 
+from benchio import write_results
+
 REPEATS = 15
 
 
@@ -92,13 +94,11 @@ def main(argv=None):
     for name, (best, med) in rows.items():
         print(f"{name:45s} {best * 1e3:8.1f} {med * 1e3:10.1f}")
     print(f"previous / new (medians): {ratio:.2f}x; target: new <= 30 ms")
-    out = Path(__file__).parent / "results" / "reader.json"
-    out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps({
+    write_results("reader", {
         "what": "read one 50 s trial (50001 x 9)", "machine": "project 2-core machine, shared (loaded)",
         "python": platform.python_version(),
         "rows_s": {k: {"best": v[0], "median": v[1]} for k, v in rows.items()},
-        "previous_over_new_median": ratio}, indent=2))
+        "previous_over_new_median": ratio}, indent=2)
     return 0
 
 

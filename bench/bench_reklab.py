@@ -20,8 +20,6 @@ bench/results/reklab.json (fitted parameters only).
     python3 bench/bench_reklab.py [PATH/experimental_data.mat]   (default: ../shared/...)
 """
 
-import json
-import os
 import sys
 import tempfile
 from pathlib import Path
@@ -34,6 +32,8 @@ sys.path.insert(0, str(ROOT))
 
 import trialformat as tf  # noqa: E402
 from estimation.lab import AnalysisOptions, Unit, analyse  # noqa: E402
+
+from benchio import write_results
 
 DATA = ROOT.parent / "shared" / "data" / "reklab-ankle" / "experimental_data.mat"
 NAMES = ("z_df", "z_df2", "z_df3", "z_pf", "z_pf2")
@@ -139,12 +139,7 @@ def main(argv=None) -> int:
               f"{a['K']:.1f}, {a['B']:.3f}, {a['I']:.4f} | {b['K']:.1f}, {b['B']:.3f}, "
               f"{b['I']:.4f} | {', '.join(r.flags) or '-'} | {'yes' if s2 else 'NO'} / "
               f"{'yes' if sc else 'NO'} / {'yes' if sf else 'NO'} |")
-    out = ROOT / "bench" / "results" / "reklab.json"
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=".reklab.", suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(doc, fh, indent=1)
-    os.replace(tmp, out)
-    print(f"wrote {out.relative_to(ROOT)}")
+    write_results("reklab", doc)
     return 0
 
 

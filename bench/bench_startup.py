@@ -11,16 +11,16 @@ interpreter. Prints a table and writes bench/results/startup.json (atomically).
     python3 bench/bench_startup.py [REPEATS]
 """
 
-import json
 import os
 import platform
 import resource
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
+
+from benchio import write_results
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAVY = ("numpy", "scipy", "matplotlib", "fmpy", "pandas")
@@ -94,13 +94,7 @@ def main(argv=None) -> int:
     print(f"CPU of --help / CPU of the eager imports alone: {helped / eager:.2f}")
     doc = {"repeats": repeats, "python": platform.python_version(),
            "load_average_1min": os.getloadavg()[0], "rows": rows}
-    out = ROOT / "bench" / "results" / "startup.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=".startup.", suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(doc, fh, indent=1)
-    os.replace(tmp, out)
-    print(f"wrote {out.relative_to(ROOT)}")
+    write_results("startup", doc)
     return 0
 
 

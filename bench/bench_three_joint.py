@@ -14,7 +14,6 @@ and writes bench/results/three_joint.json.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import statistics
 import time
@@ -22,6 +21,8 @@ from pathlib import Path
 
 from orchestrator import Setup, simulate_trial
 from orchestrator.trial import simulate_plant
+
+from benchio import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results" / "three_joint.json"
 TARGET_RATIO = 1.5
@@ -72,10 +73,9 @@ def main(argv=None) -> int:
               f"{r['three_joint']['wall_s']:.2f} | {r['ratio_median']:.2f} | "
               f"{r['ratio_cpu_median']:.2f} | {r['two_joint']['plant_alone_s']:.2f} / "
               f"{r['three_joint']['plant_alone_s']:.2f} | {'met' if r['meets'] else 'missed'} |")
-    RESULTS.parent.mkdir(exist_ok=True)
-    RESULTS.write_text(json.dumps({"duration_s": args.duration, "repeat": args.repeat,
+    write_results(RESULTS.stem, {"duration_s": args.duration, "repeat": args.repeat,
                                    "machine": platform.processor() or platform.machine(),
-                                   "target_ratio": TARGET_RATIO, "rows": rows}, indent=1))
+                                   "target_ratio": TARGET_RATIO, "rows": rows}, indent=1)
     return 0
 
 

@@ -50,3 +50,19 @@ def joint_two_diverges(monkeypatch):
         return real(setup, **kwargs)
 
     monkeypatch.setattr(orchestrator.trial, "simulate_trial", fail_joint_two)
+
+
+@pytest.fixture(scope="session")
+def swap(tmp_path_factory):
+    """variant -> path of the hand-written swap plant FMU of that variant
+    (tests/orchestrator/swap_plants), each built once per session."""
+    from swap_plants import build_swap_plant
+
+    folder = tmp_path_factory.mktemp("swap")
+    built = {}
+
+    def get(variant):
+        if variant not in built:
+            built[variant] = build_swap_plant(folder, variant)
+        return built[variant]
+    return get

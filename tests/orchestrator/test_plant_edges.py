@@ -14,7 +14,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from swap_plants import build_swap_plant, have_compiler
+from swap_plants import have_compiler
 
 from orchestrator import (ContractError, FMUCallError, Plant, PlantFileError, PlantWarning,
                           Setup, run_grid, simulate_trial)
@@ -23,18 +23,6 @@ from orchestrator.cli import main as cli_main
 from orchestrator.errors import ParameterError
 
 pytestmark = pytest.mark.skipif(not have_compiler(), reason="no C compiler")
-
-
-@pytest.fixture(scope="module")
-def swap(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("swap_edges")
-    built = {}
-
-    def get(variant):
-        if variant not in built:
-            built[variant] = build_swap_plant(folder, variant)
-        return built[variant]
-    return get
 
 
 @pytest.fixture

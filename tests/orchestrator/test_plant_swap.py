@@ -10,7 +10,7 @@ import zipfile
 import fmpy
 import numpy as np
 import pytest
-from swap_plants import build_swap_plant, have_compiler
+from swap_plants import have_compiler
 
 from orchestrator import (ContractError, Plant, PlantFileError, PlantWarning, RateError, Setup,
                           run_grid, simulate_plant, simulate_trial)
@@ -18,19 +18,6 @@ from orchestrator import (ContractError, Plant, PlantFileError, PlantWarning, Ra
 pytestmark = pytest.mark.skipif(not have_compiler(), reason="no C compiler")
 
 SETUP = Setup.reference(0, 0)
-
-
-@pytest.fixture(scope="module")
-def swap(tmp_path_factory):
-    """variant -> built FMU path (each built once per module)."""
-    folder = tmp_path_factory.mktemp("swap")
-    built = {}
-
-    def get(variant):
-        if variant not in built:
-            built[variant] = build_swap_plant(folder, variant)
-        return built[variant]
-    return get
 
 
 def _trial(plant, dof=1, seconds=1.0, **kw):

@@ -1,0 +1,37 @@
+"""What every bench does at its end: write its figures to ``bench/results/NAME.json``
+atomically (a temporary file in the same folder, then one rename), so that an interrupted
+bench never leaves a cut results file, and say where they went.
+
+Standard library only: a bench must not change what it measures by importing the project.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+#: where the benches' results go
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def write_results(name: str, doc, *, indent: int = 1) -> Path:
+    """Write ``doc`` as ``bench/results/NAME.json`` atomically; print and return the path.
+
+    ``doc`` is any JSON-serialisable value; numpy scalars are written as floats
+    (``default=float``).
+    """
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    out = RESULTS / f"{name}.json"
+    fd, tmp = tempfile.mkstemp(dir=RESULTS, prefix=f".{name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(doc, fh, indent=indent, default=float)
+            fh.write("\n")
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    print(f"wrote bench/results/{out.name}")
+    return out
