@@ -308,6 +308,9 @@ def run_figures(args) -> int:
     if kind == "auto":
         kind = "paper" if _paper_kind(trials) else "lab"
     if kind == "paper":
+        if options.reflex:
+            print("note: --reflex applies to the lab report (--kind lab) of one-joint "
+                  "recordings; the paper's figures do not use it", file=sys.stderr)
         truth = args.truth
         if truth == "auto":  # the known answer of this project's simulated arms
             n = max(t.n_dof for t in trials)

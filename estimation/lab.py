@@ -470,7 +470,7 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
         result.reflex, result.reflex_not_fitted = reflex_of_trials(usable, options.reflex)
         result.warnings += [f"reflex fit not done for {s['trial']}: "
                             f"{s['reason'].removeprefix('reflex fit: ')}"
-                            for s in result.reflex_not_fitted if s["kind"] == "short"]
+                            for s in result.reflex_not_fitted if s["kind"] != "joints"]
     return result
 
 

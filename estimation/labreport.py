@@ -312,7 +312,8 @@ def _reflex_caption(result) -> list[str]:
                   f"(the rectifier's Bussgang gain on the data)"]
         lines += [f"  FLAGGED: {w.split(':')[0][:90]}" for w in r.warnings]
     for s in result.reflex_not_fitted:
-        lines.append(f"reflex not fitted for {s['trial']} ({'too short' if s['kind'] == 'short' else 'several joints'})")
+        why = {"short": "too short", "rate": "sampled too slowly"}.get(s["kind"], "several joints")
+        lines.append(f"reflex not fitted for {s['trial']} ({why}: see the warnings)")
     return lines
 
 

@@ -68,9 +68,14 @@ RECTIFY = ("auto", "positive", "negative", "none")
 
 
 class ReflexNotApplicable(EstimationError):
-    """The parallel-cascade fit does not apply to this input (a recording shorter than
-    :func:`minimum_samples`, a trial of several joints); the lab pipeline reports it as a
-    warning or note and keeps the K-B-I result."""
+    """The parallel-cascade fit does not apply to this input: ``kind`` ``"short"`` (a
+    recording shorter than :func:`minimum_samples`), ``"rate"`` (sampled too slowly for
+    the fit's low-pass) or ``"joints"`` (a trial of several joints); the lab pipeline
+    reports it as a warning or note and keeps the K-B-I result."""
+
+    def __init__(self, message, kind="short"):
+        super().__init__(message)
+        self.kind = kind
 
 
 @dataclass
@@ -214,13 +219,17 @@ class _Work:
 def _prepare(theta, tau, fs, options) -> _Work:
     from scipy import signal
     if options.lowpass_hz >= fs / 2:
-        raise EstimationError(f"reflex lowpass_hz {options.lowpass_hz} Hz must be below "
-                              f"the Nyquist frequency {fs / 2:g} Hz")
+        raise ReflexNotApplicable(f"reflex fit: lowpass_hz {options.lowpass_hz:g} Hz must be "
+                                  f"below the Nyquist frequency {fs / 2:g} Hz of the "
+                                  f"recording (sampled at {fs:g} Hz)", kind="rate")
     q = max(1, int(round(fs / options.work_fs)))
     fw = fs / q
     if options.lowpass_hz >= 0.8 * fw / 2:
-        raise EstimationError(f"reflex lowpass_hz {options.lowpass_hz} Hz too close to the "
-                              f"working Nyquist frequency {fw / 2:g} Hz; raise work_fs")
+        raise ReflexNotApplicable(f"reflex fit: lowpass_hz {options.lowpass_hz:g} Hz too close "
+                                  f"to the working Nyquist frequency {fw / 2:g} Hz (the "
+                                  f"recording is sampled at {fs:g} Hz; at least "
+                                  f"{2 * options.lowpass_hz / 0.8:g} Hz needed); raise work_fs",
+                                  kind="rate")
     sos = signal.butter(4, options.lowpass_hz, fs=fs, output="sos")
     th = signal.sosfiltfilt(sos, theta)[::q]
     tq = signal.sosfiltfilt(sos, tau)[::q]
@@ -562,7 +571,7 @@ def fit_reflex_trial(trial, options: ReflexOptions | None = None) -> ReflexResul
     """
     if trial.n_dof != 1:
         raise ReflexNotApplicable(f"the reflex model is for one joint; trial {trial.name!r} "
-                                  f"has {trial.n_dof} joints")
+                                  f"has {trial.n_dof} joints", kind="joints")
     return fit_reflex(trial.theta[:, 0], trial.tau_h[:, 0], trial.fs, options,
                       name=trial.name, joint=1)
 
@@ -582,9 +591,9 @@ def reflex_of_trials(trials, options=True) -> tuple[list, list]:
     """The lab estimator's hook: the parallel-cascade fit of every trial of a set where it
     applies. Returns ``(results, not_fitted)``: the ReflexResult of each fitted trial and,
     for each other one, ``{"trial", "reason", "kind"}`` with ``kind`` ``"joints"`` (a
-    trial of several joints: the model is for one) or ``"short"`` (fewer samples than
-    :func:`minimum_samples`; the reason names the minimum). Other errors (bad options,
-    non-finite data) raise."""
+    trial of several joints: the model is for one), ``"short"`` (fewer samples than
+    :func:`minimum_samples`; the reason names the minimum) or ``"rate"`` (sampled too
+    slowly for the fit's low-pass). Other errors (bad options, non-finite data) raise."""
     opts = options if isinstance(options, ReflexOptions) else ReflexOptions()
     opts.check()
     fitted, skipped = [], []
@@ -597,7 +606,7 @@ def reflex_of_trials(trials, options=True) -> tuple[list, list]:
         try:
             fitted.append(fit_reflex_trial(t, opts))
         except ReflexNotApplicable as exc:
-            skipped.append({"trial": t.name, "kind": "short", "reason": str(exc)})
+            skipped.append({"trial": t.name, "kind": exc.kind, "reason": str(exc)})
     return fitted, skipped
 
 

@@ -199,3 +199,14 @@ def test_no_reflex_asked_report_unchanged(tmp_path):
     rows = list(csv.DictReader(open(tmp_path / "rep" / "parameters.csv")))
     assert "model" not in rows[0] and len(rows) == 1
     assert not (tmp_path / "rep" / "reflex.csv").exists()
+
+
+def test_slowly_sampled_recording_keeps_kbi():
+    trial = parallel_cascade_trial("slow", duration_s=60.0, fs=100.0, f_max_hz=10.0)
+    res = lab.analyse(lab.Unit("slow", [trial], "single recording"),
+                      lab.AnalysisOptions(reflex=True, nperseg=1024, segments=0,
+                                          sensitivity=False))
+    assert res.fit.K[0, 0] > 0 and res.reflex == []
+    assert res.reflex_not_fitted[0]["kind"] == "rate"
+    assert any(w.startswith("reflex fit not done for slow: lowpass_hz 40 Hz") and
+               "100 Hz" in w for w in res.warnings)
