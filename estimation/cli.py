@@ -51,9 +51,11 @@ def _analysis_arguments(p, truth_default="none") -> None:
                         "default), coherence (1/std from the coherence, Bendat & Piersol), "
                         "relative (1/|Zhat| of the bin), none; model: 1/|Zfit| of a first "
                         "fit (two passes)")
-    g.add_argument("--segments", type=int, default=4,
+    g.add_argument("--segments", type=int, default=None,
                    help="time segments of each recording fitted apart to detect a "
-                        "time-varying impedance (0: no check; default 4)")
+                        "time-varying impedance (0: no check; default 4, fewer with a "
+                        "warning where a recording is too short; more than a recording "
+                        "allows is refused, naming the largest that works)")
     g.add_argument("--sampling-correction", choices=("auto", "on", "off"), default="auto",
                    help="half-sample delay of the inertial term for left-limit torque "
                         "sampling; auto: only for trials declaring sensors.torque_sampling "
@@ -206,6 +208,7 @@ def run_estimate(args) -> int:
     status = _report_failures(failures, results)
     for r in results:
         print(describe(r))
+    _reflex_note(results)
     if args.json:
         doc = [{**r.to_json(), "condition": r.label,
                 "compensated": r.corrections["left_limit_sampling"],
@@ -274,6 +277,23 @@ def describe(r) -> str:
     return "\n".join(lines)
 
 
+def reflex_note(results) -> str | None:
+    """One line for the results ``--reflex`` does not apply to (several joints): which,
+    and that their K, B, M result is the usual one; None when it applied everywhere."""
+    joints = [r for r in results if any(s["kind"] == "joints" for s in r.reflex_not_fitted)]
+    if not joints:
+        return None
+    which = ", ".join(f"{r.label} ({r.n_dof} joints)" for r in joints)
+    return (f"note: --reflex fits the one-joint parallel-cascade model; not applied to "
+            f"{which}: their result above is the usual M, B, K fit")
+
+
+def _reflex_note(results) -> None:
+    note = reflex_note(results)
+    if note:
+        print(note, file=sys.stderr)
+
+
 def _paper_kind(trials) -> bool:
     return all(t.n_dof == 2 and str(t.meta.get("source", "")).startswith(
         ("simulated: orchestrator", "estimation.synthetic: linear")) for t in trials)
@@ -288,6 +308,9 @@ def run_figures(args) -> int:
     if kind == "auto":
         kind = "paper" if _paper_kind(trials) else "lab"
     if kind == "paper":
+        if options.reflex:
+            print("note: --reflex applies to the lab report (--kind lab) of one-joint "
+                  "recordings; the paper's figures do not use it", file=sys.stderr)
         truth = args.truth
         if truth == "auto":  # the known answer of this project's simulated arms
             n = max(t.n_dof for t in trials)
@@ -310,6 +333,7 @@ def run_figures(args) -> int:
             **options.__dict__, "truth": truth})
         for r in results:
             print(describe(r))
+        _reflex_note(results)
     for f in files:
         print(f)
     return status

@@ -49,7 +49,10 @@ class AnalysisOptions:
     band_coherence_min, band_power_db : the data band: coherence at least this, the
         perturbation's PSD within this many dB of its peak
     sensitivity : refit over neighbouring bands and weightings (:func:`sensitivity`)
-    segments : time segments of each recording fitted apart (0: no check)
+    segments : time segments of each recording fitted apart (0: no check; None: 4, or
+        as many as the recording allows when that is 2 or 3, or none with a warning when
+        it allows fewer). A number larger than a recording allows
+        (:func:`max_time_segments`) is refused for it (EstimationError naming the largest)
     nperseg, noverlap, nfft : Welch segment, overlap, FFT length [samples]
         (defaults 8192, 3/4 of nperseg, nperseg)
     window : scipy.signal window name
@@ -69,7 +72,7 @@ class AnalysisOptions:
     band_coherence_min: float = 0.9
     band_power_db: float = 40.0
     sensitivity: bool = True
-    segments: int = 4
+    segments: int | None = None
     nperseg: int = 8192
     noverlap: int | None = None
     nfft: int | None = None
@@ -94,9 +97,10 @@ class AnalysisOptions:
         if self.weighting not in WEIGHTINGS:
             raise EstimationError(f"weighting must be one of {WEIGHTINGS}, got "
                                   f"{self.weighting!r}")
-        if self.segments < 0 or self.segments == 1:
-            raise EstimationError(f"segments must be 0 (no check) or at least 2, got "
-                                  f"{self.segments}")
+        if self.segments is not None and (isinstance(self.segments, bool) or not isinstance(
+                self.segments, (int, np.integer)) or self.segments < 0 or self.segments == 1):
+            raise EstimationError(f"--segments must be 0 (no check) or a whole number of at "
+                                  f"least 2, got {self.segments!r}")
         if self.band_hz is not None and not 0 <= self.band_hz[0] < self.band_hz[1]:
             raise EstimationError(f"band must be 0 <= lo < hi [Hz], got {self.band_hz}")
         if self.nperseg < 2:
@@ -163,6 +167,8 @@ class LabResult:
     segments: list = field(default_factory=list)
     flags: list = field(default_factory=list)
     reflex: list | None = None  # estimation.reflex.ReflexResult per trial, when asked
+    #: trials the reflex fit was asked for and does not apply to: {"trial", "kind", "reason"}
+    reflex_not_fitted: list = field(default_factory=list)
 
     def parameters(self) -> dict:
         """``{"M"|"B"|"K": {"value", "ci", "unit", "name"}}`` with (n, n) nested lists."""
@@ -188,6 +194,7 @@ class LabResult:
             out["errors_pct"] = {k: v.tolist() for k, v in self.errors_pct.items()}
         if self.reflex is not None:
             out["reflex"] = [r.to_json() for r in self.reflex]
+            out["reflex_not_fitted"] = self.reflex_not_fitted
         return out
 
     @property
@@ -414,6 +421,7 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
     found = data_band(whole, usable, options)
     band, band_source = _band(usable, options, fs, method, found)
     _check_band_bins(band, band_source, welch, fs)
+    n_time, time_note = time_segments(usable, band, options)  # refused before the fits
     est = replace(whole, band_hz=band)
     sampling = _switch(options.sampling_correction, left_limit_sampled(usable))
     leakage_ok = method != "direct" and options.window == "hann"
@@ -442,9 +450,11 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
         result.errors_pct = {p: 100 * v for p, v in fit.relative_errors(*truth).items()}
     if options.sensitivity:
         result.sensitivity = sensitivity(est, fit, fit_kw, options, found)
-    if options.segments:
-        result.segments = segment_fits(usable, method, band, options, fit_kw)
+    if n_time:
+        result.segments = segment_fits(usable, method, band, replace(options, segments=n_time),
+                                       fit_kw)
     result.warnings = fit_warnings(result, options) + few_segments_warning(usable, result)
+    result.warnings += time_note
     conv = convention_warnings(result, usable)
     tv = time_varying_warnings(result)
     sens = sensitivity_warnings(result)
@@ -455,8 +465,12 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
                          "band-sensitive"))))
     result.warnings += band_suggestion(result, options)
     if options.reflex:
-        from .reflex import reflex_of_unit
-        result.reflex = reflex_of_unit(usable, options.reflex)
+        # the K-B-I result stands whatever the reflex fit can do with these trials
+        from .reflex import reflex_of_trials
+        result.reflex, result.reflex_not_fitted = reflex_of_trials(usable, options.reflex)
+        result.warnings += [f"reflex fit not done for {s['trial']}: "
+                            f"{s['reason'].removeprefix('reflex fit: ')}"
+                            for s in result.reflex_not_fitted if s["kind"] != "joints"]
     return result
 
 
@@ -703,6 +717,77 @@ def _slice(trial, a, b):
                    name=f"{trial.name}[{a}:{b}]", **arrays)
 
 
+#: the time-variation check's default number of segments, and the shortest Welch segment
+#: [samples] of a time segment it fits
+DEFAULT_TIME_SEGMENTS, MIN_SEGMENT_NPERSEG = 4, 256
+
+
+def _segment_nperseg(n_samples, S, nperseg) -> int:
+    """Welch segment of each of S time segments: the largest power of two <= a quarter of
+    the time segment, at most ``nperseg``."""
+    L = n_samples // S
+    return min(nperseg, 2 ** int(np.floor(np.log2(max(L // 4, 1)))))
+
+
+def _segments_work(n_samples, S, band, options, fs) -> bool:
+    nper = _segment_nperseg(n_samples, S, options.nperseg)
+    return nper >= MIN_SEGMENT_NPERSEG and np.count_nonzero(
+        band_mask(np.fft.rfftfreq(nper, 1 / fs), band)) >= 4 * MIN_BAND_BINS
+
+
+def max_time_segments(n_samples, band, options, fs) -> int:
+    """The most time segments (:func:`segment_fits`) a recording of ``n_samples`` at ``fs``
+    [Hz] allows in ``band`` [Hz]: each needs a Welch segment of at least
+    MIN_SEGMENT_NPERSEG samples whose grid puts at least 4 * MIN_BAND_BINS bins in the
+    band. 0 when not even 2 work. (The Welch segment shrinks as S grows, so the test is
+    monotone in S.)"""
+    hi = n_samples // (4 * MIN_SEGMENT_NPERSEG)
+    if hi < 2 or not _segments_work(n_samples, 2, band, options, fs):
+        return 0
+    lo = 2
+    while lo < hi:  # largest S in [lo, hi] that works
+        mid = (lo + hi + 1) // 2
+        if _segments_work(n_samples, mid, band, options, fs):
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+def time_segments(trials, band, options) -> tuple[int, list[str]]:
+    """How many time segments the time-variation check fits, and a warning when it is not
+    what was asked. ``options.segments`` 0: none; None (default): DEFAULT_TIME_SEGMENTS,
+    fewer if the recordings allow fewer (said), none if they allow fewer than 2 (said); a
+    number: that many, refused (EstimationError naming --segments, the value and the
+    largest that works for these recordings) when more than they allow."""
+    asked = options.segments
+    if asked == 0:
+        return 0, []
+    n = min(t.n_samples for t in trials)
+    fs = trials[0].fs
+    top = max_time_segments(n, band, options, fs)
+    names = ", ".join(t.name for t in trials)
+    why = (f"each time segment needs a Welch segment of at least {MIN_SEGMENT_NPERSEG} "
+           f"samples with {4 * MIN_BAND_BINS} frequencies in the band {band[0]:.4g}-"
+           f"{band[1]:.4g} Hz")
+    if asked is None:
+        if top >= DEFAULT_TIME_SEGMENTS:
+            return DEFAULT_TIME_SEGMENTS, []
+        if top >= 2:
+            return top, [f"time-variation check on {top} time segments, not "
+                         f"{DEFAULT_TIME_SEGMENTS}: {names} ({n / fs:.4g} s) allows at most "
+                         f"{top} ({why})"]
+        return 0, [f"time-variation check not done: {names} ({n / fs:.4g} s) is too short "
+                   f"for 2 time segments ({why})"]
+    if asked > top:
+        largest = (f"the largest that works for it is --segments {top}" if top
+                   else "it allows none (give --segments 0)")
+        raise EstimationError(
+            f"--segments {asked}: more time segments than {names} ({n} samples, "
+            f"{n / fs:.4g} s) allows; {largest} ({why})")
+    return asked, []
+
+
 def segment_fits(trials, method, band, options, fit_kw) -> list[dict]:
     """Fit each of ``options.segments`` successive time segments of the recordings alone.
 
@@ -716,10 +801,9 @@ def segment_fits(trials, method, band, options, fit_kw) -> list[dict]:
     S = options.segments
     N = min(t.n_samples for t in trials)
     L = N // S
-    nper = min(options.nperseg, 2 ** int(np.floor(np.log2(max(L // 4, 1)))))
+    nper = _segment_nperseg(N, S, options.nperseg)
     fs = trials[0].fs
-    if nper < 256 or np.count_nonzero(band_mask(np.fft.rfftfreq(nper, 1 / fs), band)) \
-            < 4 * MIN_BAND_BINS:
+    if not _segments_work(N, S, band, options, fs):
         return []
     out = []
     for s in range(S):

@@ -100,13 +100,24 @@ def _unit(column: str) -> str:
 
 
 def write_parameters(results, folder: Path) -> list[Path]:
+    """``parameters.csv`` and ``parameters.md``: the second-order fit of every result and,
+    where the reflex fit was asked, one row (and a table) per fitted trial of the
+    intrinsic + reflex model (column ``model``; its VAFs in ``VAF_*`` columns)."""
     rows = result_rows(results)
-    cols = list(rows[0]) if rows else []
+    md = [parameters_markdown(results)]
+    if any(getattr(r, "reflex", None) is not None for r in results):
+        from .reflex import reflex_markdown, reflex_parameter_rows
+        for row in rows:
+            row["model"] = "second-order (frequency domain)"
+        rows += reflex_parameter_rows(results)
+        md.append(reflex_markdown(results))
+        md += [f"- {r.label}: reflex fit not done for {s['trial']}: {s['reason']}"
+               for r in results for s in r.reflex_not_fitted if s["kind"] == "joints"]
+    cols = list(dict.fromkeys(c for row in rows for c in row))
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    writer = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n", restval="")
     writer.writeheader()
     writer.writerows(rows)
-    md = [parameters_markdown(results)]
     return [_text(folder / "parameters.csv", buf.getvalue()),
             _text(folder / "parameters.md", "\n".join(md))]
 
@@ -199,6 +210,8 @@ def bode(result):
     f = result.f[sel]
     caption = _parameter_caption(result)
     width = max(4.2 * n * n + 1, 6.5) if n <= 2 else 4.4 * n
+    if n == 1 and result.reflex:  # room for the parallel-cascade caption
+        width = 8.5
     height = (6.6 if n <= 2 else 6.6 * n) + 0.9 + 0.22 * len(caption)
     fig = plt.figure(figsize=(width, height))
     axes = element_axes(fig, n, ("mag", "phase", "coherence"))
@@ -223,6 +236,8 @@ def bode(result):
                           color="tab:blue", alpha=0.25, lw=0)
         ax_p.semilogx(f, phase, color="tab:blue", lw=1.0)
         ax_p.semilogx(f, model_phase, "k--", lw=1.2)
+        if n == 1:
+            _draw_reflex(ax_m, ax_p, f, result.reflex or [], model_phase)
         ax_c.semilogx(f, c, color="tab:green", lw=1.0)
         ax_c.axhline(PHASE_MIN_COHERENCE, color="0.5", lw=0.6, ls=":")
         ax_c.set_ylim(0, 1.05)
@@ -253,6 +268,55 @@ def bode(result):
     return fig
 
 
+#: line styles of the parallel-cascade model: intrinsic, reflex, total
+REFLEX_STYLES = {"intrinsic": ("tab:orange", "-."), "reflex": ("tab:purple", ":"),
+                 "total": ("tab:red", "-")}
+
+
+def _draw_reflex(ax_m, ax_p, f, fits, reference_deg) -> None:
+    """The intrinsic, reflex and total frequency responses of each parallel-cascade fit
+    (:meth:`estimation.reflex.ReflexResult.frequency_response`): magnitude, and phase.
+    The intrinsic and total phases are drawn on the branch (multiple of 360 deg) nearest
+    ``reference_deg``, the second-order fit's phase that the estimate's coherent
+    stretches are aligned to, so that model and estimate are compared on the same branch
+    (the line is broken where the branch changes); the reflex pathway's phase, which its
+    delay turns by several turns, as its principal value, broken at each wrap."""
+    for r in fits:
+        resp = r.frequency_response(f)
+        suffix = f" ({r.trial})" if len(fits) > 1 else ""
+        for part, (color, ls) in REFLEX_STYLES.items():
+            z = resp[part]
+            ax_m.loglog(f, np.abs(z), color=color, ls=ls, lw=1.3,
+                        label=f"{part} (parallel cascade){suffix}")
+            ph = np.degrees(np.angle(z))
+            if part != "reflex":
+                ph = ph + 360.0 * np.round((reference_deg - ph) / 360.0)
+            ph[1:][np.abs(np.diff(ph)) > 180] = np.nan
+            ax_p.semilogx(f, ph, color=color, ls=ls, lw=1.3)
+
+
+def _reflex_caption(result) -> list[str]:
+    lines = []
+    for r in result.reflex or []:
+        v, c = r.values, r.ci
+        lines += [f"intrinsic + reflex, parallel cascade ({r.trial}, rectify {r.rectify}):",
+                  f"  K = {v['K']:.4g} +- {c['K']:.2g} N m/rad, B = {v['B']:.4g} +- "
+                  f"{c['B']:.2g} N m s/rad, I = {v['I']:.4g} +- {c['I']:.2g} kg m^2",
+                  f"  G = {v['G']:.4g} +- {c['G']:.2g} N m s/rad, delay {v['delay_ms']:.1f} "
+                  f"+- {c['delay_ms']:.2g} ms, low-pass {v['cutoff_hz']:.3g} +- "
+                  f"{c['cutoff_hz']:.2g} Hz, damping {v['damping']:.3g} +- {c['damping']:.2g}",
+                  f"  VAF intrinsic {r.vaf_pct['intrinsic']:.1f} %, reflex "
+                  f"{r.vaf_pct['reflex']:.1f} %, total {r.vaf_pct['total']:.1f} % (K-B-I alone "
+                  f"{r.vaf_pct['intrinsic_only']:.1f} %)",
+                  f"  reflex drawn with its best linear gain {r.linear_gain:.3g} "
+                  f"(the rectifier's Bussgang gain on the data)"]
+        lines += [f"  FLAGGED: {w.split(':')[0][:90]}" for w in r.warnings]
+    for s in result.reflex_not_fitted:
+        why = {"short": "too short", "rate": "sampled too slowly"}.get(s["kind"], "several joints")
+        lines.append(f"reflex not fitted for {s['trial']} ({why}: see the warnings)")
+    return lines
+
+
 def _parameter_caption(result) -> list[str]:
     """One line per fitted parameter: ``K = [...] +- [...] N m/rad`` (I for one joint),
     with the sensitivity range over bands and weightings when computed."""
@@ -264,7 +328,9 @@ def _parameter_caption(result) -> list[str]:
             lo, hi = result.sensitivity["range"][p]
             text += f"  (range {_matrix_text(lo)} ... {_matrix_text(hi)})"
         lines.append(text)
-    return lines
+    if result.reflex:
+        lines.insert(0, "second-order fit (fitted model):")
+    return lines + _reflex_caption(result)
 
 
 def _matrix_text(a) -> str:

@@ -67,6 +67,17 @@ NAMES = {"K": "intrinsic stiffness", "B": "intrinsic damping", "I": "intrinsic i
 RECTIFY = ("auto", "positive", "negative", "none")
 
 
+class ReflexNotApplicable(EstimationError):
+    """The parallel-cascade fit does not apply to this input: ``kind`` ``"short"`` (a
+    recording shorter than :func:`minimum_samples`), ``"rate"`` (sampled too slowly for
+    the fit's low-pass) or ``"joints"`` (a trial of several joints); the lab pipeline
+    reports it as a warning or note and keeps the K-B-I result."""
+
+    def __init__(self, message, kind="short"):
+        super().__init__(message)
+        self.kind = kind
+
+
 @dataclass
 class ReflexOptions:
     """Settings of the parallel-cascade fit (module docstring).
@@ -135,6 +146,25 @@ class ReflexResult:
     options: dict
     jackknife: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
+    #: best linear gain of the nonlinearity on the fitted velocity, cov(N(v), v) / var(v)
+    #: (Bussgang 1952; 1 for "none", about 0.5 / -0.5 for a half-wave rectifier): what the
+    #: rectified pathway contributes to the frequency response
+    linear_gain: float = 1.0
+
+    def frequency_response(self, f) -> dict:
+        """The fitted model as frequency responses from the angle to the torque [N m/rad]
+        at ``f`` (nf,) [Hz]: ``intrinsic`` ``K + j w B - w^2 I``, ``reflex`` ``G kappa j w
+        LP(j w) exp(-j w d)`` with ``kappa`` the best linear gain of the nonlinearity
+        (:attr:`linear_gain`) and LP the continuous-time low-pass, and ``total`` their
+        sum; complex (nf,) arrays. The rectified pathway's harmonics and offset are not in
+        a frequency response: this is its best linear approximation."""
+        v = self.values
+        jw = 2j * np.pi * np.asarray(f, dtype=float)
+        wn = 2 * np.pi * v["cutoff_hz"]
+        lp = wn * wn / (jw * jw + 2 * v["damping"] * wn * jw + wn * wn)
+        intrinsic = v["K"] + v["B"] * jw + v["I"] * jw * jw
+        reflex = v["G"] * self.linear_gain * jw * lp * np.exp(-jw * v["delay_ms"] * 1e-3)
+        return {"intrinsic": intrinsic, "reflex": reflex, "total": intrinsic + reflex}
 
     def to_json(self) -> dict:
         return {"trial": self.trial, "joint": self.joint, "fs_hz": self.fs,
@@ -144,6 +174,7 @@ class ReflexResult:
                                    "confidence": self.confidence} for p in PARAMS},
                 "vaf_pct": self.vaf_pct, "intrinsic_only": self.intrinsic_only,
                 "resists_stretch": self.resists_stretch, "n_samples": self.n_samples,
+                "linear_gain": self.linear_gain,
                 "interval_method": f"delete-one-block jackknife, {len(self.jackknife)} "
                                    f"blocks",
                 "options": self.options, "warnings": self.warnings}
@@ -188,25 +219,48 @@ class _Work:
 def _prepare(theta, tau, fs, options) -> _Work:
     from scipy import signal
     if options.lowpass_hz >= fs / 2:
-        raise EstimationError(f"reflex lowpass_hz {options.lowpass_hz} Hz must be below "
-                              f"the Nyquist frequency {fs / 2:g} Hz")
+        raise ReflexNotApplicable(f"reflex fit: lowpass_hz {options.lowpass_hz:g} Hz must be "
+                                  f"below the Nyquist frequency {fs / 2:g} Hz of the "
+                                  f"recording (sampled at {fs:g} Hz)", kind="rate")
     q = max(1, int(round(fs / options.work_fs)))
     fw = fs / q
     if options.lowpass_hz >= 0.8 * fw / 2:
-        raise EstimationError(f"reflex lowpass_hz {options.lowpass_hz} Hz too close to the "
-                              f"working Nyquist frequency {fw / 2:g} Hz; raise work_fs")
+        raise ReflexNotApplicable(f"reflex fit: lowpass_hz {options.lowpass_hz:g} Hz too close "
+                                  f"to the working Nyquist frequency {fw / 2:g} Hz (the "
+                                  f"recording is sampled at {fs:g} Hz; at least "
+                                  f"{2 * options.lowpass_hz / 0.8:g} Hz needed); raise work_fs",
+                                  kind="rate")
     sos = signal.butter(4, options.lowpass_hz, fs=fs, output="sos")
     th = signal.sosfiltfilt(sos, theta)[::q]
     tq = signal.sosfiltfilt(sos, tau)[::q]
     vel = np.gradient(th, 1.0 / fw)
     acc = np.gradient(vel, 1.0 / fw)
-    skip = int(np.ceil(options.skip_s * fw)) + int(np.ceil(options.delay_ms[1] * 1e-3 * fw)) + 2
+    skip = _skip(options, fw)
     if th.size - skip < fw * options.segments:  # at least 1 s per jackknife block
-        raise EstimationError(f"reflex fit: {(th.size - skip) / fw:.3g} s of data after the "
-                              f"first {skip / fw:.3g} s are too few for "
-                              f"{options.segments} jackknife blocks of at least 1 s; record "
-                              f"longer or lower 'segments'")
+        need = minimum_samples(options, fs)
+        raise ReflexNotApplicable(
+            f"reflex fit: the recording has {theta.size / fs:.4g} s ({theta.size} samples), "
+            f"fewer than the minimum of {need / fs:.4g} s ({need} samples at {fs:g} Hz: the "
+            f"first {options.skip_s:g} s and the longest delay searched, "
+            f"{options.delay_ms[1]:g} ms, left out, then {options.segments} jackknife "
+            f"blocks of at least 1 s); record at least {need / fs:.4g} s")
     return _Work(fw, th, vel, acc, tq, skip)
+
+
+def _skip(options, fw) -> int:
+    """Working samples at the start left out of every fit (transients, longest delay)."""
+    return int(np.ceil(options.skip_s * fw)) + int(np.ceil(options.delay_ms[1] * 1e-3 * fw)) + 2
+
+
+def minimum_samples(options: "ReflexOptions | None", fs: float) -> int:
+    """The fewest samples at ``fs`` [Hz] a recording needs for :func:`fit_reflex`: the
+    first ``skip_s`` and the longest delay searched left out, then ``segments`` jackknife
+    blocks of at least 1 s at the working rate (``fs / round(fs / work_fs)``)."""
+    options = options or ReflexOptions()
+    q = max(1, int(round(fs / options.work_fs)))
+    fw = fs / q
+    n_work = _skip(options, fw) + int(np.ceil(fw * options.segments - 1e-9))
+    return (n_work - 1) * q + 1  # every q-th sample from the first
 
 
 def _nonlinearity(vel, rectify):
@@ -466,12 +520,16 @@ def fit_reflex(theta, tau, fs, options: ReflexOptions | None = None, *, name="",
         est = np.array([j[p] for j in jack])
         ci[p] = float(tq * np.sqrt((m - 1) / m * np.sum((est - est.mean()) ** 2)))
     vafs, alone = _vafs(w, mask, mode, values)
+    rows = mask > 0
+    v = w.vel[rows] - w.vel[rows].mean()
+    u = _nonlinearity(w.vel, mode)[rows]
+    kappa = float(np.dot(u - u.mean(), v) / np.dot(v, v)) if np.dot(v, v) > 0 else 0.0
     resists = bool(values["G"] > 0) if mode != "negative" else bool(values["G"] < 0)
     result = ReflexResult(
         trial=name, joint=joint, fs=float(fs), work_fs=w.fs, rectify=mode, values=values,
         ci=ci, confidence=options.confidence, vaf_pct=vafs, intrinsic_only=alone,
         n_samples=int(mask.sum()), resists_stretch=resists, options=asdict(options),
-        jackknife=jack)
+        jackknife=jack, linear_gain=kappa)
     result.warnings = reflex_warnings(result, options)
     return result
 
@@ -512,20 +570,44 @@ def fit_reflex_trial(trial, options: ReflexOptions | None = None) -> ReflexResul
     Raises EstimationError for a trial of several joints.
     """
     if trial.n_dof != 1:
-        raise EstimationError(f"the reflex model is for one joint; trial {trial.name!r} has "
-                              f"{trial.n_dof} joints")
+        raise ReflexNotApplicable(f"the reflex model is for one joint; trial {trial.name!r} "
+                                  f"has {trial.n_dof} joints", kind="joints")
     return fit_reflex(trial.theta[:, 0], trial.tau_h[:, 0], trial.fs, options,
                       name=trial.name, joint=1)
 
 
 def reflex_of_unit(trials, options=True) -> list:
-    """The parallel-cascade fit of every trial of a set (the lab estimator's hook).
+    """The parallel-cascade fit of every trial of a set.
 
-    ``options`` is a ReflexOptions or True (defaults). Raises EstimationError for trials
-    of several joints.
+    ``options`` is a ReflexOptions or True (defaults). Raises ReflexNotApplicable (an
+    EstimationError) for trials of several joints or too short (:func:`reflex_of_trials`
+    reports those instead).
     """
     opts = options if isinstance(options, ReflexOptions) else ReflexOptions()
     return [fit_reflex_trial(t, opts) for t in trials]
+
+
+def reflex_of_trials(trials, options=True) -> tuple[list, list]:
+    """The lab estimator's hook: the parallel-cascade fit of every trial of a set where it
+    applies. Returns ``(results, not_fitted)``: the ReflexResult of each fitted trial and,
+    for each other one, ``{"trial", "reason", "kind"}`` with ``kind`` ``"joints"`` (a
+    trial of several joints: the model is for one), ``"short"`` (fewer samples than
+    :func:`minimum_samples`; the reason names the minimum) or ``"rate"`` (sampled too
+    slowly for the fit's low-pass). Other errors (bad options, non-finite data) raise."""
+    opts = options if isinstance(options, ReflexOptions) else ReflexOptions()
+    opts.check()
+    fitted, skipped = [], []
+    for t in trials:
+        if t.n_dof != 1:
+            skipped.append({"trial": t.name, "kind": "joints", "reason": (
+                f"the parallel-cascade model is for one joint; {t.name!r} has "
+                f"{t.n_dof} joints")})
+            continue
+        try:
+            fitted.append(fit_reflex_trial(t, opts))
+        except ReflexNotApplicable as exc:
+            skipped.append({"trial": t.name, "kind": exc.kind, "reason": str(exc)})
+    return fitted, skipped
 
 
 COLUMNS = ("label", "trial", "rectify") + tuple(
@@ -545,6 +627,31 @@ def reflex_rows(results) -> list:
             row += [r.vaf_pct[k] for k in ("intrinsic", "reflex", "total", "intrinsic_only")]
             row += [r.intrinsic_only[k] for k in ("K", "B", "I")]
             rows.append(dict(zip(COLUMNS, row)))
+    return rows
+
+
+def reflex_parameter_rows(results) -> list:
+    """Rows of parameters.csv for the parallel-cascade fits: one per fitted trial, with the
+    keys of lab.result_rows for the intrinsic K, B, I (I under M) and their intervals, the
+    reflex parameters and intervals, and the three time-domain VAFs."""
+    rows = []
+    for res in results:
+        for r in res.reflex or []:
+            v, c = r.values, r.ci
+            row = {"label": res.label, "method": "parallel cascade (time domain)",
+                   "element": "Z11", "model": f"intrinsic + reflex: {r.trial}"}
+            for p, key in (("I", "M"), ("B", "B"), ("K", "K")):
+                row[f"{key} [{UNITS[p]}]"] = v[p]
+                row[f"{key}_ci [{UNITS[p]}]"] = c[p]
+            for p in ("G", "delay_ms", "cutoff_hz", "damping"):
+                row[f"{p} [{UNITS[p]}]"] = v[p]
+                row[f"{p}_ci [{UNITS[p]}]"] = c[p]
+            row.update({"rectify": r.rectify,
+                        "VAF_intrinsic [%]": r.vaf_pct["intrinsic"],
+                        "VAF_reflex [%]": r.vaf_pct["reflex"],
+                        "VAF_total [%]": r.vaf_pct["total"],
+                        "VAF_KBI_alone [%]": r.vaf_pct["intrinsic_only"]})
+            rows.append(row)
     return rows
 
 

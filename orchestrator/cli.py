@@ -143,6 +143,9 @@ def _simulate(args) -> int:
         setup = setup.with_controller(time_delay_estimation=False)
     parameters = dict(args.plant_parameter or {})
     if args.rk4_step is not None:
+        from .trial import check_rk4_step
+        # refused before the plant loads: the range follows from the communication step
+        check_rk4_step(args.rk4_step, args.comm_step or setup.Ts, option="--rk4-step")
         parameters["rk4_step"] = args.rk4_step
     trial = simulate_trial(setup, perturbed_dof=dof, level=args.perturbation, seed=args.seed,
                            duration_s=args.duration, effects=effects, plant=args.fmu,

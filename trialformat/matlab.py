@@ -140,6 +140,7 @@ def _trial_variables(path: Path, data: dict) -> list:
             return list(value)
         return []
 
+    _refuse_struct_grids(path, user)
     structs = {k: elements(v) for k, v in user.items() if elements(v)}
     holding = {k: v for k, v in structs.items() if all("t" in e for e in v)}
     if len(holding) == 1:
@@ -159,6 +160,27 @@ def _trial_variables(path: Path, data: dict) -> list:
                            f"a field 't' ({descr}); a trial needs t, theta, tau_h (and "
                            f"tau_delta, tau_m) as variables or as the fields of one struct")
     return []  # the caller tries NLID objects, else refuses listing variables and classes
+
+
+def _refuse_struct_grids(path, user: dict) -> None:
+    """A struct array of more than one row and column (``S(2,2)``: scipy leaves it as an
+    array of structs) is refused naming its size, its fields and the layouts accepted."""
+    for k, v in user.items():
+        if not (isinstance(v, np.ndarray) and v.dtype == object and v.ndim >= 2
+                and sum(d > 1 for d in v.shape) > 1):
+            continue
+        items = list(v.flat)
+        if not all(isinstance(e, (dict, sio.matlab.mat_struct)) for e in items):
+            continue
+        fields = sorted(set().union(*(e.keys() if isinstance(e, dict) else e._fieldnames
+                                      for e in items)))
+        shape = "x".join(map(str, v.shape))
+        raise MatFileError(
+            f"{path}: struct array '{k}' is {shape} ({len(items)} elements with fields "
+            f"{', '.join(fields)}); accepted are the variables t, theta, tau_h (...) and "
+            f"meta at the top level, one struct holding them, or a 1-by-N (or N-by-1) "
+            f"struct array of such structs (one trial each): save {k}(:)' from MATLAB "
+            f"(\"{k} = {k}(:)'; save(...)\") to read its {len(items)} trials")
 
 
 def split_variable(path):

@@ -118,7 +118,7 @@ def test_refusals():
         bad = sim["tau"].copy()
         bad[5] = np.nan
         fit_reflex(sim["theta"], bad, 1000.0)
-    with pytest.raises(EstimationError, match="too few"):
+    with pytest.raises(EstimationError, match="fewer than the minimum of 9.123 s"):
         fit_reflex(sim["theta"][:2000], sim["tau"][:2000], 1000.0)
     trial = parallel_cascade_trial(duration_s=10.0)
     trial.meta["n_dof"] = 2
