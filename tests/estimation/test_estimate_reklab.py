@@ -5,6 +5,7 @@ table of docs/results.md)."""
 
 import importlib.util
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,9 @@ pytestmark = pytest.mark.skipif(not MAT.is_file(), reason=f"{MAT.name} not at ..
 
 @pytest.fixture(scope="module")
 def bench():
+    # as when run as a script: its own folder (bench/benchio.py) on the import path
+    if str(ROOT / "bench") not in sys.path:
+        sys.path.insert(0, str(ROOT / "bench"))
     spec = importlib.util.spec_from_file_location("bench_reklab",
                                                   ROOT / "bench" / "bench_reklab.py")
     mod = importlib.util.module_from_spec(spec)
