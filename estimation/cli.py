@@ -147,8 +147,9 @@ def _read(sources, options):
                 t.source_arg = s
             trials += got
     _unique_names(trials)
-    for w in caught:
-        print(f"note: {tf.csvtable.printable(str(w.message))}", file=sys.stderr)
+    from trialformat.cliargs import reader_notes
+    for line in reader_notes(caught):
+        print(line, file=sys.stderr)
     return trials
 
 

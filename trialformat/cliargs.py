@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 
 #: Longest trial [samples] a command simulates (10 000 s at 1 kHz).
 MAX_SAMPLES = 10_000_000
@@ -61,3 +62,33 @@ def check_samples(duration_s: float, fs: float, *, option: str = "--duration") -
         raise ValueError(f"{option} {duration_s:g} s at {fs:g} Hz is {duration_s * fs:.3g} "
                          f"samples, above the limit of {MAX_SAMPLES} (give {option} <= "
                          f"{MAX_SAMPLES / fs:g})")
+
+
+_NAMED = re.compile(r"^(?P<file>[^\n:]+?):(?P<name>[^\n:]+): (?P<text>.*)$", re.S)
+
+
+def reader_notes(caught) -> list:
+    """The lines a command prints for the warnings its readers gave (``warnings.
+    catch_warnings(record=True)``): libraries' deprecation notices to their own callers
+    (mat-io on pandas) dropped; one note per file for the same note on several of its
+    recordings (``FILE.mat:z_df: ...``, ``FILE.mat:z_pf: ...`` become ``FILE.mat (z_df,
+    z_pf): ...``); control characters escaped."""
+    from .csvtable import printable
+
+    merged: dict = {}
+    for w in caught:
+        if issubclass(w.category, (DeprecationWarning, FutureWarning)):
+            continue
+        text = str(w.message)
+        m = _NAMED.match(text)
+        key = (m["file"], m["text"]) if m else (None, text)
+        merged.setdefault(key, []).append(m["name"] if m else None)
+    lines = []
+    for (file, text), names in merged.items():
+        if file is None:
+            lines.append(text)
+        elif len(names) == 1:
+            lines.append(f"{file}:{names[0]}: {text}")
+        else:
+            lines.append(f"{file} ({', '.join(names)}): {text}")
+    return [f"note: {printable(line)}" for line in lines]
