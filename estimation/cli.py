@@ -67,6 +67,10 @@ def _analysis_arguments(p, truth_default="none") -> None:
                    help="also fit intrinsic K, B, I + a reflex pathway (delayed velocity, "
                         "half-wave rectified, 2nd-order low-pass) to each one-joint trial "
                         "in the time domain (estimation.reflex; docs/estimation.md)")
+    g.add_argument("--torque-sign", type=int, choices=(1, -1), default=None,
+                   help="-1: the recordings' torque has the opposite sign to the angle's "
+                        "convention (as metadata sensors.torque_sign, which it overrides: "
+                        "for files you cannot add a sidecar to)")
     g.add_argument("--pool", action="store_true",
                    help="average the spectra of unlabelled recordings of the same set-up "
                         "(by default each is estimated alone)")
@@ -133,9 +137,10 @@ def _truth(name, n):
     return None
 
 
-def _read(sources, options):
+def _read(sources, options, torque_sign=None):
     """Read the trials; the readers' warnings (keys filled from the reference, an unknown
-    format) go to stderr as one plain line each, not as Python warnings with source lines."""
+    format) go to stderr as one plain line each, not as Python warnings with source lines.
+    ``torque_sign`` (+-1, ``--torque-sign``) replaces the sign the metadata declare."""
     import trialformat as tf
     sources = [Path(s) for s in sources]
     trials = []
@@ -147,10 +152,23 @@ def _read(sources, options):
                 t.source_arg = s
             trials += got
     _unique_names(trials)
+    if torque_sign is not None:
+        for t in trials:
+            _declare_torque_sign(t, torque_sign)
     from trialformat.cliargs import reader_notes
     for line in reader_notes(caught):
         print(line, file=sys.stderr)
     return trials
+
+
+def _declare_torque_sign(trial, sign: int) -> None:
+    """The trial as if its metadata declared ``sensors.torque_sign = sign``: the reader
+    applied the declared sign d (tau_h = raw * d), so tau_h becomes raw * sign."""
+    sensors = trial.meta.setdefault("sensors", {})
+    declared = sensors.get("torque_sign", 1)
+    if declared != sign:
+        trial.tau_h = -trial.tau_h
+    sensors["torque_sign"] = sign
 
 
 def _unique_names(trials) -> None:
@@ -203,7 +221,7 @@ def run_estimate(args) -> int:
     options = options_from(args)
     if args.json is not None:
         _check_json_out(args.json)
-    trials = _read(args.source, options)
+    trials = _read(args.source, options, args.torque_sign)
     failures = []
     results = lab_results(trials, options, args.truth, failures)
     status = _report_failures(failures, results)
@@ -304,7 +322,7 @@ def run_figures(args) -> int:
     options = options_from(args)
     # refused before any reading: a report replaces only its own earlier report
     tf.logs.check_report_out(args.out, args.folders, kinds=("lab", "paper"))
-    trials = _read(args.folders, options)
+    trials = _read(args.folders, options, args.torque_sign)
     kind, status = args.kind, 0
     if kind == "auto":
         kind = "paper" if _paper_kind(trials) else "lab"

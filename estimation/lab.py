@@ -896,8 +896,9 @@ def convention_warnings(result, trials) -> list[str]:
             want = -signs[0] if len(signs) == 1 else "the opposite"
             out.append(f"torque sign reversed? Z{_e(i, i, n)}: {'; '.join(evidence)}. If the "
                        f"torque sensor's sign is opposite to the angle's, declare "
-                       f"\"sensors\": {{\"torque_sign\": {want}}} in the metadata (now "
-                       f"{now}); the reader then negates tau_h")
+                       f"\"sensors\": {{\"torque_sign\": {want}}} in the metadata or "
+                       f"the .mat's sidecar NAME.json (now {now}), or give --torque-sign "
+                       f"{want if len(signs) == 1 else -1}; the reader then negates tau_h")
     for t in trials:
         if t.meta.get("angles") == "absolute" or t.theta is None:
             continue

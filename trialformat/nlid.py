@@ -29,7 +29,8 @@ the conventions::
 ``tau_delta[j]``, ``tau_m[j]`` or ``null`` (ignored); ``torque_sign`` is
 ``sensors.torque_sign`` of log-format.md (-1: the file's torque has the opposite sign);
 ``meta`` is merged into every trial's metadata; ``variables`` holds the same keys for one
-object. Channels not mapped are kept as extra columns.
+object; ``"sensors": {"torque_sign": -1}`` at the top, as in a trial's metadata, is the
+same as ``"torque_sign": -1``. Channels not mapped are kept as extra columns.
 
 Every recording is a position perturbation of joint 1..n (``perturbation.kind:
 position``), the measured angle being the perturbation unless a ``theta_ref`` channel is
@@ -54,7 +55,7 @@ TARGETS = SIGNALS + ("theta_ref",)
 _DEFAULT_NAMES = {"theta": re.compile(r"^(?:pos|angle|theta|position)_?(\d*)$", re.I),
                   "tau_h": re.compile(r"^(?:tq|torque|tau|trq)_?(\d*)$", re.I)}
 _TARGET = re.compile(r"^(" + "|".join(TARGETS) + r")\[(\d+)\]$")
-SIDECAR_KEYS = ("channels", "torque_sign", "meta", "variables")
+SIDECAR_KEYS = ("channels", "torque_sign", "meta", "variables", "sensors")
 
 
 def inventory(path) -> dict:
@@ -153,8 +154,29 @@ def _sidecar(path: Path) -> dict:
         if not isinstance(sub, dict) or set(sub) - {"channels", "torque_sign", "meta"}:
             raise MatFileError(f"{side}: key 'variables.{name}' must be an object with "
                                f"keys among channels, torque_sign, meta")
+    _fold_sensors(doc, side)
     doc["_where"] = str(side)
     return doc
+
+
+def _fold_sensors(doc: dict, side: Path) -> None:
+    """``"sensors": {...}`` at the top, as in a trial's metadata (and as the torque-sign
+    warning says): its ``torque_sign`` is the sidecar's, the rest goes to ``meta.sensors``."""
+    if "sensors" not in doc:
+        return
+    sensors = doc.pop("sensors")
+    if not isinstance(sensors, dict):
+        raise MatFileError(f"{side}: key 'sensors' must be a JSON object")
+    sensors = dict(sensors)
+    if "torque_sign" in sensors:
+        sign = sensors.pop("torque_sign")
+        if "torque_sign" in doc and doc["torque_sign"] != sign:
+            raise MatFileError(f"{side}: 'torque_sign' {doc['torque_sign']!r} and "
+                               f"'sensors.torque_sign' {sign!r} disagree; give one")
+        doc["torque_sign"] = sign
+    if sensors:
+        meta = doc.setdefault("meta", {})
+        meta.setdefault("sensors", {}).update(sensors)
 
 
 def _settings(sidecar: dict, name: str) -> dict:

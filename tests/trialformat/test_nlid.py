@@ -98,6 +98,23 @@ def test_sidecar_maps_channels_and_sign(tmp_path):
         tf.read_trials(path, min_samples=1000)
 
 
+def test_sensors_block_of_the_sidecar_declares_the_sign_as_the_warning_says(tmp_path):
+    """``{"sensors": {"torque_sign": -1}}``, the form the torque-sign warning names."""
+    pos, tq = _signals(3)
+    path = tmp_path / "exp.mat"
+    matio.save_to_mat(str(path), {"r1": _nldat(np.column_stack([pos, tq]), ["pos1", "tq1"])},
+                      version="v7")
+    path.with_suffix(".json").write_text(json.dumps(
+        {"sensors": {"torque_sign": -1, "torque_resolution_nm": 0.01}}))
+    t, = tf.read_trials(path, min_samples=1000)
+    np.testing.assert_array_equal(t.tau_h[:, 0], -tq)
+    assert t.meta["sensors"]["torque_resolution_nm"] == 0.01
+    path.with_suffix(".json").write_text(json.dumps({"sensors": {"torque_sign": -1},
+                                                     "torque_sign": 1}))
+    with pytest.raises(MatFileError, match="'torque_sign' 1 and 'sensors.torque_sign' -1"):
+        tf.read_trials(path, min_samples=1000)
+
+
 def test_bad_objects_and_foreign_files_are_refused_with_their_contents(tmp_path):
     pos, tq = _signals(4)
     path = tmp_path / "bad.mat"
