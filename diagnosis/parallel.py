@@ -97,7 +97,7 @@ class Runner:
         it for a resumed run)."""
         arg_tuples = list(arg_tuples)
         t0 = time.perf_counter()
-        bar = tqdm(total=len(arg_tuples), desc=desc, disable=not self.progress, unit="task")
+        bar = tqdm(total=len(arg_tuples), desc=desc, disable=None if self.progress else True, unit="task")
         results = [None] * len(arg_tuples)
         try:
             if self._client is not None:

@@ -322,7 +322,7 @@ def run_validation(specs, out_dir, *, config: DiagnosisConfig = DiagnosisConfig(
             check_spec(row_path, spec, recorded)
         check_spec(out / "sets" / spec.name / SET_FILE, spec)
     rows = []
-    bar = tqdm(specs, desc="validation sets", disable=not progress, unit="set")
+    bar = tqdm(specs, desc="validation sets", disable=None if progress else True, unit="set")
     for spec in bar:
         bar.set_postfix_str(spec.name)
         row_path = out / "reports" / spec.name / "score_row.json"

@@ -253,7 +253,7 @@ def _pool(workers, n_tasks):
 
 
 def _run_tasks(tasks, pool, progress) -> list[dict]:
-    bar = tqdm(total=len(tasks), desc="estimating conditions", disable=not progress)
+    bar = tqdm(total=len(tasks), desc="estimating conditions", disable=None if progress else True)
     try:
         out = []
         for res in (pool.map(score_condition, tasks) if pool else map(score_condition, tasks)):

@@ -39,8 +39,6 @@ def main(argv=None) -> int:
 
     if args.plant is not None:  # every subcommand's default plant (grid workers inherit it)
         os.environ["ARMEXO_PLANT"] = args.plant
-    if not sys.stderr.isatty():  # progress bars are for a terminal, not for a log file
-        os.environ.setdefault("TQDM_DISABLE", "1")
     if not hasattr(args, "func"):
         parser.print_help()
         return 2

@@ -172,7 +172,7 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
             todo.append(t)
     start = time.perf_counter()
     bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc="grid", unit="trial",
-               disable=not progress)
+               disable=None if progress else True)
     fresh = scheduler is None and bool(todo) and _once_per_process(todo[0]["fmu_path"])
     runs = _execute(todo, str(out), workers, scheduler, fresh_worker=fresh)
     interrupted = False

@@ -358,7 +358,7 @@ def run_tractability(out, *, ns=NS, totals_s=TOTALS_S, quick=False, workers=2,
     todo = [t for t in tasks if not trial_exists(trials_dir / t["name"])]
     failures = []
     bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc="trials",
-               unit="trial", disable=not progress)
+               unit="trial", disable=None if progress else True)
     try:
         for res in _execute(todo, str(trials_dir), plants, workers):
             bar.update(1)
@@ -370,7 +370,7 @@ def run_tractability(out, *, ns=NS, totals_s=TOTALS_S, quick=False, workers=2,
     sim_s = time.perf_counter() - start
     cases = []
     keys = sorted({(t["n"], t["plant"], t["total_s"]) for t in tasks})
-    for n, plant, total in tqdm(keys, desc="estimating", disable=not progress):
+    for n, plant, total in tqdm(keys, desc="estimating", disable=None if progress else True):
         group = [t for t in tasks if (t["n"], t["plant"], t["total_s"]) == (n, plant, total)]
         try:
             with warnings.catch_warnings():  # the chain declares no robot block: the reader
