@@ -225,6 +225,14 @@ def _check_previous(out: Path, options: dict) -> None:
                          f"use another --out, or remove that folder")
 
 
+def _worst_text(worst) -> str:
+    """``{'vaf': 'F0R3P3', 'M': 'F0R3P3'}`` as ``VAF F0R3P3, M F0R3P3`` (friction,
+    resolution and perturbation levels of the worst condition of each measure)."""
+    if not isinstance(worst, dict):
+        return str(worst)
+    return ", ".join(f"{'VAF' if k == 'vaf' else k} {v}" for k, v in worst.items())
+
+
 def summary_lines(result, variants=None) -> list[str]:
     """A short text summary of a :func:`run_paper` result: counts, worst cases, paths.
 
@@ -263,7 +271,7 @@ def summary_lines(result, variants=None) -> list[str]:
                     f"  {a['tuning']:9s} {a['variant']:22s} VAF {a['vaf_min']:7.3f} %  "
                     f"M {a['err_M_max']:5.2f} %  B {a['err_B_max']:5.2f} %  "
                     f"K {a['err_K_max']:5.2f} %  {'met' if a['meets'] else 'NOT met'} "
-                    f"(worst: {a['worst']})")
+                    f"(worst conditions FfRrPp: {_worst_text(a['worst'])})")
     lines.append(f"report: {result['report_dir']} (table_summary.md: every estimator, MIMO "
                  f"baselines included)")
     return lines
