@@ -225,7 +225,7 @@ def header_text(exported: dict, t: dict, ident: str) -> str:
              f'#define MODEL_IDENTIFIER_STRING "{ident}"', f'#define INSTANTIATION_TOKEN "{t["guid"]}"',
              f"#define N_VR {len(v)}", f"#define NX {len(exported['states'])}",
              f"#define NP {exported['n_parameters']}", f"#define NU {len(exported['inputs'])}",
-             f"#define NOBS {exported['n_observed']}", f"#define NROT {_equations(exported)[1]}", "",
+             f"#define NOBS {exported['n_observed']}", f"#define NROT {_equations(exported)[1]}", f"#define NHOIST {max(1, len(_equations(exported)[2]))}", "",
              "enum { CAUS_PARAMETER = 0, CAUS_INPUT = 1, CAUS_OUTPUT = 2 };",
              "enum { vr_rk4_step = 0 };", "",
              "static const char *const VR_NAME[N_VR] = {", *(f"    {_cstr(x['name'])}," for x in v), "};",
@@ -382,14 +382,76 @@ def _rotated(body: str, slots: dict) -> str:
     return text
 
 
-def _equations(exported: dict) -> tuple[str, int]:
-    """(the generated C with rhs's sin/cos rotated, NROT: the number of rotation slots)."""
+def _balanced(text: str, i: int) -> int:
+    """Index after the parenthesis that closes the one at ``text[i]``."""
+    depth = 0
+    while True:
+        depth += {"(": 1, ")": -1}.get(text[i], 0)
+        i += 1
+        if depth == 0:
+            return i
+
+
+def _exp_tails(body: str, hoisted: list[str]) -> str:
+    """``body`` (the rhs) with every branch ``A + (B) * exp(E)`` whose A and B read parameters
+    only (A one, B a parenthesised expression of them) written ``md_add_exp(A, (B), E, cut)``,
+    the cut a parameter-only expression appended to ``hoisted`` (in terms of ``p``): the
+    value is the same, exp() is skipped where it cannot change the sum (LuGre's Stribeck
+    curve Fc + (Fs - Fc) exp(-(w/ws)^2) at speed, as the C FMU does).  Only a whole branch
+    or right-hand side is matched (after ``= ``, ``? `` or ``: ``, before ``;``, `` :`` or
+    `` ?``), so that no operator of higher precedence binds A or the product."""
+    import re
+
+    params = dict(re.findall(r"^    ([A-Za-z_][A-Za-z0-9_]*) = (p\[\d+\]);$", body, re.M))
+    name = r"[A-Za-z_][A-Za-z0-9_]*"
+    out, pos = [], 0
+    for m in re.finditer(rf"(?<=[=?:] )({name}) \+ \(", body):
+        if m.start() < pos or m.group(1) not in params:
+            continue
+        b_end = _balanced(body, m.end() - 1)
+        b_text = body[m.end() - 1:b_end]
+        if not body.startswith(" * exp(", b_end):
+            continue
+        e_open = b_end + len(" * exp")
+        e_end = _balanced(body, e_open)
+        if not re.match(r" :|;| \?", body[e_end:e_end + 2]):
+            continue
+        refs = re.findall(name, b_text)
+        if not refs or any(r not in params for r in refs) or re.search(r"[^A-Za-z0-9_ +\-*/().]", b_text):
+            continue
+        sub = lambda t: re.sub(name, lambda r: params[r.group(0)], t)  # noqa: E731
+        a_p, b_p = params[m.group(1)], sub(b_text)
+        hoisted.append(f"md_exp_cut({a_p}, {b_p})")
+        out += [body[pos:m.start()],
+                f"md_add_exp({m.group(1)}, {b_text}, {body[e_open + 1:e_end - 1]}, p[NP + NU + {len(hoisted) - 1}])"]
+        pos = e_end
+    return "".join(out) + body[pos:]
+
+
+#: a + b exp(e) and the cut below which it rounds to a (see _exp_tails)
+_ADD_EXP = """/* a + b exp(e), with exp() skipped where the sum rounds to a exactly: for a > 0 and
+   e < cut = log(a / |b|) - 56 log 2, |b exp(e)| < a 2^-56 (with exp's and log's rounding,
+   below a 2^-55), less than half an ulp of a, so a + b exp(e) == a in round-to-nearest.
+   cut = -inf (never skipped) unless a > 0 and b != 0 are finite. */
+static inline double md_exp_cut(double a, double b) {
+    return (a > 0.0 && b != 0.0 && isfinite(a) && isfinite(b)) ? log(a / fabs(b)) - 56.0 * 0.6931471805599453 : -INFINITY;
+}
+static inline double md_add_exp(double a, double b, double e, double cut) {
+    return e < cut ? a : a + b * exp(e);
+}
+"""
+
+
+def _equations(exported: dict) -> tuple[str, int, list[str]]:
+    """(the generated C with rhs's sin/cos rotated and its exp tails cut, NROT: the number
+    of rotation slots, the parameter-only expressions hoisted out of rhs: p[NP + NU + k])."""
     c = exported["c"]
     start = c.index("void rhs(")
     end = c.index("\n}\n", start) + 3
     slots: dict = {}
-    c = c[:start] + _rotated(c[start:end], slots) + c[end:]
-    return c, len(slots)
+    hoisted: list[str] = []
+    c = c[:start] + _rotated(_exp_tails(c[start:end], hoisted), slots) + c[end:]
+    return c, len(slots), hoisted
 
 
 _ROTATION = """/* sin and cos of an angle from an exact libm pair at a nearby reference angle (one per
@@ -445,7 +507,7 @@ def generated_c(exported: dict) -> str:
 
     body = [f"    p[{k}] = {exported['parameters'][k]['c']};  /* {exported['parameters'][k]['name']} */"
             for k in exported["dependent_order"]]
-    c, nrot = _equations(exported)
+    c, nrot, hoisted = _equations(exported)
     c = _pruned_observe(c, {x["slot"] for x in table(exported)["variables"] if x["causality"] == "output"})
     rhs, names, slots = _switched_rhs(c, exported)
     n = _n_joints(exported)
@@ -468,6 +530,7 @@ def generated_c(exported: dict) -> str:
     select = ["/* The loop of the switch combination the parameters give (-1: none, the generic loop). */",
               f"#define MD_NVARIANT {nv}"]
     if nv:
+        select.insert(0, "#ifndef MD_FORCE_GENERIC  /* -DMD_FORCE_GENERIC (tests): the generic loop only */")
         select += [f"static const int MD_SW_SLOT[{len(slots)}] = {{" + ", ".join(map(str, slots)) + "};",
                    f"static const double MD_SW_VALUE[MD_NVARIANT][{len(slots)}] = {{",
                    *("    {" + ", ".join(repr(x) for x in row) + "}," for row in values), "};",
@@ -480,7 +543,11 @@ def generated_c(exported: dict) -> str:
                    f"        if (k == {len(slots)}) return v;",
                    "    }",
                    "    return -1;",
-                   "}"]
+                   "}",
+                   "#else",
+                   "static int (*const MD_RK4[1])(Snapshot *, long long) = {0};",
+                   "static int md_variant(const double *p) { (void)p; return -1; }",
+                   "#endif"]
     else:
         select += ["static int (*const MD_RK4[1])(Snapshot *, long long) = {0};",
                    "static int md_variant(const double *p) { (void)p; return -1; }"]
@@ -490,12 +557,14 @@ def generated_c(exported: dict) -> str:
         "#pragma GCC diagnostic ignored \"-Wunused-variable\"",
         "#pragma GCC diagnostic ignored \"-Wunused-but-set-variable\"",
         "#pragma GCC diagnostic ignored \"-Wunused-function\"", "#endif",
-        "#include <math.h>", f"#define MD_ROT_OFFSET (NOBS + 1)", _ROTATION,
+        "#include <math.h>", f"#define MD_ROT_OFFSET (NOBS + 1)", _ROTATION, _ADD_EXP,
         c, "/* The generated rhs with the effect switches as arguments (constants in the loops). */", rhs,
         "/* The RK4 loops, one per combination of the switches (the states it can change only). */",
-        *loops, *generic, *select, "",
+        *(["#ifndef MD_FORCE_GENERIC", *loops, "#endif"] if loops else []), *generic, *select, "",
         "/* The dependent (calculated) parameters, from the model's bindings, in evaluation order. */",
-        "static void md_dependent(double *p) {", *body, "}", ""])
+        "static void md_dependent(double *p) {", *body,
+        "    /* parameter-only expressions of rhs, hoisted (after the inputs) */",
+        *(f"    p[NP + NU + {k}] = {e};" for k, e in enumerate(hoisted)), "}", ""])
 
 
 def _fmt(x) -> str:
