@@ -2,17 +2,20 @@
 
 50 s of plant time (5 million RK4 steps at 1e-5 s), communication step 1 ms, the master's
 own access loop (``orchestrator.plant.PlantIO``: write tau_m, doStep, read theta and tau_h)
-under bench_plant's seeded multisine (peaks [3, 1.8] N m), for three configurations:
-nominal (friction level 0), friction level 3, and every effect with friction level 2.
-Also one 50 s doStep with a constant torque (the solver alone, CPU time of the thread).
-The two plants are run alternately, best of ``--repeat``; the ratio is exported / C.
+under bench_plant's seeded multisine (peaks [3, 1.8] N m; three joints: [3, 1.8, 0.6]),
+for the configurations nominal (friction level 0), friction level 3 and every effect with
+friction level 2, of the two-joint and of the three-joint plant.  Also one 50 s doStep with
+a constant torque (the solver alone, CPU time of the thread).  The two plants are run
+alternately, best of ``--repeat``; the ratio is exported / C.  The loop is
+bench/plantio_loop.py's (shared with bench/bench_plant.py).
 
 With ``--callgrind`` the instructions executed inside fmi2DoStep are counted by valgrind
 (``--toggle-collect=fmi2DoStep``) for one doStep of ``--callgrind-seconds`` of plant time
 (constant torque), in a small C driver compiled from each FMU's ``sources/`` with the build's
 flags: a figure that does not depend on the machine's load.
 
-Usage: ``python bench/bench_modelica_export.py [--repeat 3] [--callgrind] [--json FILE]``.
+Usage: ``python bench/bench_modelica_export.py [--repeat 3] [--callgrind] [--only NAME ...]
+[--json FILE]``.
 """
 from __future__ import annotations
 
@@ -32,7 +35,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.bench_plant import N, T_END, TS, run_plantio, torque  # noqa: E402
+from bench.bench_plant import N, T_END, TS, torque  # noqa: E402
+from bench.plantio_loop import plantio_loop  # noqa: E402
 
 import fmus  # noqa: E402
 from fmus import modelica_build  # noqa: E402
@@ -43,34 +47,32 @@ EFFECTS = {"actuator_lag.time_constant_s": 0.003,
            **{f"transmission_compliance.{p}[{j}]": v for p, v in (("k_t", 300.0), ("c_t", 0.5)) for j in (1, 2)},
            **{f"interface_compliance.{p}[{j}]": v for p, v in (("k_s", 400.0), ("c_s", 2.0)) for j in (1, 2)},
            "gravity.tilt_deg": 10.0, "inertia_mismatch.scale": 0.8, "torque_sensor_lag.time_constant_s": 0.002}
-CONFIGS = {"nominal": friction_parameters(0), "friction 3": friction_parameters(3),
-           "every effect, friction 2": {**EFFECTS, **friction_parameters(2)}}
+EFFECTS3 = {"actuator_lag.time_constant_s": 0.003,
+            **{f"transmission_compliance.k_t[{j}]": k for j, k in ((1, 300.0), (2, 300.0), (3, 100.0))},
+            **{f"transmission_compliance.c_t[{j}]": c for j, c in ((1, 0.5), (2, 0.5), (3, 0.1))},
+            **{f"interface_compliance.k_s[{j}]": k for j, k in ((1, 400.0), (2, 400.0), (3, 100.0))},
+            **{f"interface_compliance.c_s[{j}]": c for j, c in ((1, 2.0), (2, 2.0), (3, 0.3))},
+            "gravity.tilt_deg": 10.0, "inertia_mismatch.scale": 0.8, "torque_sensor_lag.time_constant_s": 0.002}
+#: name -> (joints, FMU parameters)
+CONFIGS = {"nominal": (2, friction_parameters(0)), "friction 3": (2, friction_parameters(3)),
+           "every effect, friction 2": (2, {**EFFECTS, **friction_parameters(2)}),
+           "3 joints, nominal": (3, friction_parameters(0, 3)),
+           "3 joints, friction 3": (3, friction_parameters(3, 3)),
+           "3 joints, every effect, friction 2": (3, {**EFFECTS3, **friction_parameters(2, 3)})}
+PEAKS = {2: (3.0, 1.8), 3: (3.0, 1.8, 0.6)}
+H = 1e-5  # the FMUs' default rk4_step
 
 
 def loop(plant: Plant, params: dict, u: np.ndarray) -> tuple[float, float, np.ndarray]:
     """PlantIO loop over 50 s: (wall, CPU, last outputs)."""
-    plant.start(params)
-    io = plant.io
-    read, write, step, val_in, val_out = io.read, io.write, io.step, io.val_in, io.val_out
-    ul = u.tolist()
-    status = 0
-    c0, t0 = time.process_time(), time.perf_counter()
-    for k in range(N):
-        val_in[0], val_in[1] = ul[k]
-        status |= write()
-        status |= step(k * TS, TS, 1)
-        status |= read()
-    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    if status:
-        raise RuntimeError(f"an FMI call failed on {plant.path.name}")
-    return wall, cpu, np.array(val_out[:])
+    return plantio_loop(plant, params, u, TS)
 
 
 def one_call(plant: Plant, params: dict, seconds: float = T_END) -> float:
-    """CPU time of this thread in one doStep over ``seconds`` (constant torque [1, 0.5])."""
+    """CPU time of this thread in one doStep over ``seconds`` (constant torque [1, 0.5(, 0)])."""
     plant.start(params)
     io = plant.io
-    io.val_in[0], io.val_in[1] = 1.0, 0.5
+    io.val_in[:] = [1.0, 0.5, 0.0][:len(io.val_in)]
     io.write()
     c0 = time.thread_time()
     status = io.step(0.0, seconds, 1)
@@ -155,33 +157,57 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--callgrind", action="store_true", help="count instructions with valgrind")
     ap.add_argument("--callgrind-seconds", type=float, default=1.0)
+    ap.add_argument("--only", nargs="+", default=None, metavar="NAME", choices=list(CONFIGS),
+                    help="run only these configurations")
+    ap.add_argument("--compare-dir", default=None, metavar="DIR",
+                    help="also time the exported FMUs of the same names in DIR (e.g. built from an "
+                         "older commit with `python -m fmus.build --out-dir DIR`), alternately with the others")
     ap.add_argument("--json", default=None, help="write the results here (atomically)")
     args = ap.parse_args(argv)
-    c_path = fmus.default_fmu_path()
-    m_path = modelica_build.default_fmu_path()
-    u = torque()
+    configs = {k: v for k, v in CONFIGS.items() if args.only is None or k in args.only}
+    joints = sorted({n for n, _ in configs.values()})
+    paths = {n: {"c": fmus.default_fmu_path(n=n), "modelica": modelica_build.default_fmu_path(n=n)}
+             for n in joints}
+    if args.compare_dir:
+        for n in joints:
+            other = Path(args.compare_dir) / modelica_build.fmu_name(2, n)
+            if not other.is_file():
+                raise SystemExit(f"--compare-dir: {other} does not exist")
+            paths[n]["other"] = other
+    keys = list(paths[joints[0]])
     results = {"load_average": os.getloadavg(), "configs": {}}
-    with Plant(c_path) as cp, Plant(m_path) as mp:
-        for name, params in CONFIGS.items():
-            best = {"c": [np.inf, np.inf, np.inf], "modelica": [np.inf, np.inf, np.inf]}
-            for _ in range(args.repeat):
-                for key, plant in (("c", cp), ("modelica", mp)):
-                    wall, cpu, y = loop(plant, params, u)
-                    best[key][0] = min(best[key][0], wall)
-                    best[key][1] = min(best[key][1], cpu)
-                    best[key][2] = min(best[key][2], one_call(plant, params))
-                    best[key + "_y"] = y
-            diff = float(np.max(np.abs(best["c_y"] - best["modelica_y"])))
-            results["configs"][name] = {k: best[k] for k in ("c", "modelica")} | {"last_output_diff": diff}
+    for n in joints:
+        u = torque(peaks=PEAKS[n])
+        plants = {k: Plant(paths[n][k]) for k in keys}
+        try:
+            for name, (nj, params) in configs.items():
+                if nj != n:
+                    continue
+                best = {k: [np.inf, np.inf, np.inf] for k in keys}
+                for _ in range(args.repeat):
+                    for key, plant in plants.items():
+                        wall, cpu, y = loop(plant, params, u)
+                        best[key][0] = min(best[key][0], wall)
+                        best[key][1] = min(best[key][1], cpu)
+                        best[key][2] = min(best[key][2], one_call(plant, params))
+                        best[key + "_y"] = y
+                diff = float(np.max(np.abs(best["c_y"] - best["modelica_y"])))
+                results["configs"][name] = ({"joints": n} | {k: best[k] for k in keys}
+                                            | {"last_output_diff": diff})
+        finally:
+            for plant in plants.values():
+                plant.close()
     if args.callgrind:
-        for name, params in CONFIGS.items():
-            ic = {k: callgrind(p, params, args.callgrind_seconds) for k, p in (("c", c_path), ("modelica", m_path))}
+        for name, (n, params) in configs.items():
+            ic = {k: callgrind(p, params, args.callgrind_seconds) for k, p in paths[n].items()}
             results["configs"][name]["instructions"] = ic
+            results["configs"][name]["instructions_per_rk4_step"] = {
+                k: v / (args.callgrind_seconds / H) for k, v in ic.items()}
     results["load_average_end"] = os.getloadavg()
     print(f"50 s of plant time, 1 ms steps, PlantIO loop; best of {args.repeat}; "
           f"load average {results['load_average'][0]:.1f} -> {results['load_average_end'][0]:.1f}")
     print("| configuration | C FMU loop wall (CPU) | exported loop wall (CPU) | ratio (CPU) "
-          "| one 50 s doStep CPU: C / exported | ratio |" + (" instructions in doStep: C / exported | ratio |"
+          "| one 50 s doStep CPU: C / exported | ratio |" + (" instructions per RK4 step: C / exported | ratio |"
                                                          if args.callgrind else ""))
     print("|---|---|---|---|---|---|" + ("---|---|" if args.callgrind else ""))
     for name, r in results["configs"].items():
@@ -189,9 +215,22 @@ def main(argv=None) -> int:
         row = (f"| {name} | {c[0]:.2f} s ({c[1]:.2f} s) | {m[0]:.2f} s ({m[1]:.2f} s) | {m[1] / c[1]:.2f} "
                f"| {c[2]:.2f} s / {m[2]:.2f} s | {m[2] / c[2]:.2f} |")
         if "instructions" in r:
-            ic = r["instructions"]
-            row += f" {ic['c'] / 1e6:.0f} M / {ic['modelica'] / 1e6:.0f} M | {ic['modelica'] / ic['c']:.2f} |"
+            ic = r["instructions_per_rk4_step"]
+            row += f" {ic['c']:.0f} / {ic['modelica']:.0f} | {ic['modelica'] / ic['c']:.2f} |"
         print(row)
+    if "other" in keys:
+        print(f"the exported FMUs of {args.compare_dir}, timed alternately with the above:")
+        print("| configuration | loop CPU: other / C | ratio | one 50 s doStep CPU: other / C | ratio |"
+              + (" instructions per RK4 step: other | ratio |" if args.callgrind else ""))
+        print("|---|---|---|---|---|" + ("---|---|" if args.callgrind else ""))
+        for name, r in results["configs"].items():
+            c, o = r["c"], r["other"]
+            row = (f"| {name} | {o[1]:.2f} s / {c[1]:.2f} s | {o[1] / c[1]:.2f} "
+                   f"| {o[2]:.2f} s / {c[2]:.2f} s | {o[2] / c[2]:.2f} |")
+            if "instructions" in r:
+                ic = r["instructions_per_rk4_step"]
+                row += f" {ic['other']:.0f} | {ic['other'] / ic['c']:.2f} |"
+            print(row)
     if args.json:
         out = Path(args.json)
         tmp = out.with_suffix(".tmp")

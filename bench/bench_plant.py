@@ -47,6 +47,7 @@ from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 import fmus  # noqa: E402
+from bench.plantio_loop import plantio_loop  # noqa: E402
 from orchestrator.plant import Plant  # noqa: E402
 from fmus.build import CFLAGS  # noqa: E402
 from fmus.variables import MODEL_NAME, VR, friction_parameters  # noqa: E402
@@ -58,13 +59,14 @@ N = int(round(T_END / TS))
 TARGETS = {0: 1.0, 3: 1.3}
 
 
-def torque(n: int = N, seed: int = 7) -> np.ndarray:
-    """Seeded sum of 25 sines, 0.2-15 Hz, scaled to peaks [3, 1.8] N m; shape (n, 2)."""
+def torque(n: int = N, seed: int = 7, peaks=(3.0, 1.8)) -> np.ndarray:
+    """Seeded sum of 25 sines, 0.2-15 Hz, scaled to ``peaks`` [N m] (default [3, 1.8]);
+    shape (n, len(peaks)); a longer ``peaks`` adds columns, the first ones unchanged."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) * TS
     f = np.linspace(0.2, 15.0, 25)
     out = []
-    for peak in (3.0, 1.8):
+    for peak in peaks:
         ph = rng.uniform(0, 2 * np.pi, len(f))
         u = np.sin(2 * np.pi * np.outer(t, f) + ph).sum(axis=1)
         out.append(peak * u / np.max(np.abs(u)))
@@ -161,22 +163,9 @@ class Bench:
 
 
 def run_plantio(plant: Plant, level: int, u: np.ndarray) -> tuple[float, float, np.ndarray]:
-    """The master's per-sample access on a Plant: (wall time, CPU time, last outputs)."""
-    plant.start(friction_parameters(level))
-    io = plant.io
-    read, write, step, val_in, val_out = io.read, io.write, io.step, io.val_in, io.val_out
-    ul = u.tolist()
-    status = 0
-    c0, t0 = time.process_time(), time.perf_counter()
-    for k in range(N):
-        val_in[0], val_in[1] = ul[k]
-        status |= write()
-        status |= step(k * TS, TS, 1)
-        status |= read()
-    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    if status:
-        raise RuntimeError(f"an FMI call failed in the PlantIO loop of {plant.path.name}")
-    return wall, cpu, np.array(val_out[:])
+    """The master's per-sample access on a Plant at friction ``level``: (wall time, CPU time,
+    last outputs); the loop is bench/plantio_loop.py's."""
+    return plantio_loop(plant, friction_parameters(level), u, TS)
 
 
 def cpu_model() -> str:

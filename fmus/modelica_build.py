@@ -47,14 +47,26 @@ MODELS = {2: "ArmExo.ArmExoPlant", 3: "ArmExo.ArmExoPlant3"}
 EXTRA_OUTPUTS = ("tau_act", "friction.tau_f", "friction.z", "theta_link", "arm.theta")
 
 
-#: The rigid configuration (no actuator or sensor lag, rigid transmission and cuff, level
-#: plane): the values its switch parameters take.  The build also compiles the generated
-#: rhs with these switches as constants ("rhs_rigid"; the C compiler drops the equations
-#: they switch off) and the FMU uses it when the parameters give that configuration:
-#: nominal and every friction level.
-RIGID = {"actuator_lag.on": 0.0, "transmission_compliance.on": 0.0, "interface_compliance.on": 0.0,
-         "torque_sensor_lag.on": 0.0, "robot.tilted": 0.0, "cuff_rigid": 1.0,
-         **{f"robot.Jm_on_link[{j}]": 1.0 for j in (1, 2, 3)}}
+#: The effect switches of the model: each effect's ``on`` (computed from its parameters, see
+#: docs/plant.md) and the tilt of the plane.  The build compiles the generated rhs once per
+#: combination of their values with the switches as constants (``md_rhs_sw`` inlined into one
+#: RK4 loop per combination, over the states that combination can change), so that the C
+#: compiler drops what they switch off; the FMU takes the loop of the combination its
+#: parameters give (:func:`switch_values` lists the switch parameters each sets).
+SWITCHES = ("actuator_lag.on", "transmission_compliance.on", "interface_compliance.on",
+            "torque_sensor_lag.on", "robot.tilted")
+
+
+def switch_values(bits, n: int) -> dict:
+    """The value of every switch parameter when the switches ``SWITCHES`` have the values
+    ``bits`` (0 or 1 each): they and the ones the model derives from them (``cuff_rigid =
+    not interface_compliance.on``, ``robot.Jm_on_link[j] = not transmission_compliance.on``).
+    A parameter set whose switch parameters match no combination runs the generic loop."""
+    v = {k: float(b) for k, b in zip(SWITCHES, bits, strict=True)}
+    v["cuff_rigid"] = 1.0 - v["interface_compliance.on"]
+    for j in range(1, n + 1):
+        v[f"robot.Jm_on_link[{j}]"] = 1.0 - v["transmission_compliance.on"]
+    return v
 
 
 class ExporterUnavailable(BuildError):
@@ -213,7 +225,7 @@ def header_text(exported: dict, t: dict, ident: str) -> str:
              f'#define MODEL_IDENTIFIER_STRING "{ident}"', f'#define INSTANTIATION_TOKEN "{t["guid"]}"',
              f"#define N_VR {len(v)}", f"#define NX {len(exported['states'])}",
              f"#define NP {exported['n_parameters']}", f"#define NU {len(exported['inputs'])}",
-             f"#define NOBS {exported['n_observed']}", f"#define NROT {_equations(exported)[3]}", "",
+             f"#define NOBS {exported['n_observed']}", f"#define NROT {_equations(exported)[1]}", f"#define NHOIST {max(1, len(_equations(exported)[2]))}", "",
              "enum { CAUS_PARAMETER = 0, CAUS_INPUT = 1, CAUS_OUTPUT = 2 };",
              "enum { vr_rk4_step = 0 };", "",
              "static const char *const VR_NAME[N_VR] = {", *(f"    {_cstr(x['name'])}," for x in v), "};",
@@ -245,47 +257,97 @@ def header_text(exported: dict, t: dict, ident: str) -> str:
     return "\n".join(lines)
 
 
-def _rigid_rhs(exported: dict) -> tuple[str, list[tuple[int, float]]]:
-    """The generated rhs with the rigid configuration's switches as constants, and the
-    (slot, value) pairs that select it; ("", []) when the model lacks a switch."""
-    c, symbols = exported["c"], exported.get("symbols", {})
+def _n_joints(exported: dict) -> int:
+    return len([v for v in exported["variables"] if v.startswith("tau_m[")])
+
+
+def _switched_rhs(c: str, exported: dict) -> tuple[str, list[str], list[int]]:
+    """The generated rhs (from ``c``) as ``md_rhs_sw``: always inlined, each switch parameter
+    read from an argument instead of ``p``; (its text, the switch names in argument order,
+    their slots in ``p``), or ("", [], []) when the model lacks a switch (then no variants).
+
+    Raises
+    ------
+    BuildError
+        The rhs reads a switch otherwise than ``SYMBOL = p[SLOT];`` (the exporter changed).
+    """
+    symbols = exported.get("symbols", {})
     slots = {p["name"]: p["slot"] for p in exported["parameters"]}
-    n = len([v for v in exported["variables"] if v.startswith("tau_m[")])
-    switches = {k: v for k, v in RIGID.items() if not k.startswith("robot.Jm_on_link[")
-                or int(k.split("[")[1][:-1]) <= n}
-    if any(k not in slots or k not in symbols for k in switches):
-        return "", []
+    names = list(switch_values([0] * len(SWITCHES), _n_joints(exported)))
+    if any(k not in slots or k not in symbols for k in names):
+        return "", [], []
     start = c.index("void rhs(")
     end = c.index("\n}\n", start) + 3
-    body = c[start:end].replace("void rhs(", "static void rhs_rigid(", 1)
-    for name, value in switches.items():
+    body = c[start:end]
+    head = "void rhs(double t, const double *y, const double *p, double *w, double *dy) {"
+    if not body.startswith(head):
+        raise BuildError("the generated rhs does not start with '" + head + "': the exporter's output changed")
+    body = ("static inline __attribute__((always_inline)) void md_rhs_sw(double t, const double *y, "
+            "const double *p, double *w, double *dy, "
+            + ", ".join(f"const double sw{k}" for k in range(len(names))) + ") {" + body[len(head):])
+    for k, name in enumerate(names):
         line = f"    {symbols[name]} = p[{slots[name]}];"
         if line not in body:
-            if f"{symbols[name]}" in body:
-                raise BuildError(f"the generated rhs reads the switch {name} otherwise than "
-                                 f"'{line.strip()}': the exporter's output changed")
-            continue
-        body = body.replace(line, f"    {symbols[name]} = {value!r};")
-    return body, [(slots[k], v) for k, v in switches.items()]
+            raise BuildError(f"the generated rhs reads the switch {name} otherwise than "
+                             f"'{line.strip()}': the exporter's output changed")
+        body = body.replace(line, f"    {symbols[name]} = sw{k};")
+    return body, names, [slots[k] for k in names]
 
 
-def rigid_active_states(rigid: str, exported: dict) -> list[int]:
-    """States whose derivative the rigid rhs can make nonzero: all but those assigned
-    ``SWITCH ? ... : 0.0`` with a switch that is 0 there (read from the C text; a state
-    not matched is kept)."""
+def active_states(rhs: str, exported: dict, values: dict) -> list[int]:
+    """States whose derivative can be nonzero when the switch parameters have ``values``: all
+    but those assigned ``SWITCH ? ... : 0.0`` with a switch that is 0 there (read from the C
+    text of the rhs; a state not matched is kept)."""
     import re
 
     symbols = exported.get("symbols", {})
-    off = {symbols[k] for k, v in RIGID.items() if v == 0.0 and k in symbols}
+    off = {symbols[k] for k, v in values.items() if v == 0.0 and k in symbols}
     active = []
     for k in range(len(exported["states"])):
-        m = re.search(rf"^    dy\[{k}\] = ([A-Za-z0-9_]+);$", rigid, re.M)
+        m = re.search(rf"^    dy\[{k}\] = ([A-Za-z0-9_]+);$", rhs, re.M)
         if m:
-            a = re.search(rf"^    {re.escape(m.group(1))} = ([A-Za-z0-9_]+) \? .* : 0\.0;$", rigid, re.M)
+            a = re.search(rf"^    {re.escape(m.group(1))} = ([A-Za-z0-9_]+) \? .* : 0\.0;$", rhs, re.M)
             if a and a.group(1) in off:
                 continue
         active.append(k)
     return active
+
+
+def _rk4_loop(name: str, args: str, active: list[int]) -> list[str]:
+    """C of ``static int name(Snapshot *s, long long n)``: classical RK4 as solver.h's with
+    ``md_rhs_sw(..., args)`` inlined, over the states ``active`` only (the others have
+    derivative 0 and keep their values exactly, as in a loop over all states)."""
+    def each(fmt):
+        return "        " + " ".join(fmt.format(i=i) for i in active)
+    return [
+        f"static int {name}(Snapshot *s, long long n) {{",
+        "    const double h = s->h, h2 = 0.5 * s->h, h6 = s->h / 6.0;",
+        "    const double *p = s->d.p;",
+        "    double *w = s->d.w;",
+        "    double x[NX], k1[NX], k2[NX], k3[NX], k4[NX], xt[NX];",
+        "    int i, bad = -1;",
+        "    long long k;",
+        "    for (i = 0; i < NX; i++) x[i] = xt[i] = s->x[i];",
+        "    for (k = 0; k < n; k++) {",
+        f"        md_rhs_sw(0.0, x, p, w, k1, {args});",
+        each("xt[{i}] = x[{i}] + h2 * k1[{i}];"),
+        f"        md_rhs_sw(0.0, xt, p, w, k2, {args});",
+        each("xt[{i}] = x[{i}] + h2 * k2[{i}];"),
+        f"        md_rhs_sw(0.0, xt, p, w, k3, {args});",
+        each("xt[{i}] = x[{i}] + h * k3[{i}];"),
+        f"        md_rhs_sw(0.0, xt, p, w, k4, {args});",
+        "        double acc = 0.0; /* NaN iff some x[i] is Inf or NaN */",
+        each("x[{i}] += h6 * (k1[{i}] + 2.0 * (k2[{i}] + k3[{i}]) + k4[{i}]); acc += 0.0 * x[{i}];"),
+        "        if (!(acc == 0.0)) {",
+        each("if (bad < 0 && !isfinite(x[{i}])) bad = {i};"),
+        "            break;",
+        "        }",
+        "    }",
+        "    s->nSteps += k;",
+        "    s->time = s->startTime + (double)s->nSteps * h;",
+        "    for (i = 0; i < NX; i++) s->x[i] = x[i];",
+        "    return bad;",
+        "}", ""]
 
 
 def _calls(text: str, fn: str):
@@ -320,38 +382,101 @@ def _rotated(body: str, slots: dict) -> str:
     return text
 
 
-def _equations(exported: dict) -> tuple[str, str, list, int]:
-    """(the generated C with rhs's sin/cos rotated, rhs_rigid or "", its selector, NROT)."""
+def _balanced(text: str, i: int) -> int:
+    """Index after the parenthesis that closes the one at ``text[i]``."""
+    depth = 0
+    while True:
+        depth += {"(": 1, ")": -1}.get(text[i], 0)
+        i += 1
+        if depth == 0:
+            return i
+
+
+def _exp_tails(body: str, hoisted: list[str]) -> str:
+    """``body`` (the rhs) with every branch ``A + (B) * exp(E)`` whose A and B read parameters
+    only (A one, B a parenthesised expression of them) written ``md_add_exp(A, (B), E, cut)``,
+    the cut a parameter-only expression appended to ``hoisted`` (in terms of ``p``): the
+    value is the same, exp() is skipped where it cannot change the sum (LuGre's Stribeck
+    curve Fc + (Fs - Fc) exp(-(w/ws)^2) at speed, as the C FMU does).  Only a whole branch
+    or right-hand side is matched (after ``= ``, ``? `` or ``: ``, before ``;``, `` :`` or
+    `` ?``), so that no operator of higher precedence binds A or the product."""
+    import re
+
+    params = dict(re.findall(r"^    ([A-Za-z_][A-Za-z0-9_]*) = (p\[\d+\]);$", body, re.M))
+    name = r"[A-Za-z_][A-Za-z0-9_]*"
+    out, pos = [], 0
+    for m in re.finditer(rf"(?<=[=?:] )({name}) \+ \(", body):
+        if m.start() < pos or m.group(1) not in params:
+            continue
+        b_end = _balanced(body, m.end() - 1)
+        b_text = body[m.end() - 1:b_end]
+        if not body.startswith(" * exp(", b_end):
+            continue
+        e_open = b_end + len(" * exp")
+        e_end = _balanced(body, e_open)
+        if not re.match(r" :|;| \?", body[e_end:e_end + 2]):
+            continue
+        refs = re.findall(name, b_text)
+        if not refs or any(r not in params for r in refs) or re.search(r"[^A-Za-z0-9_ +\-*/().]", b_text):
+            continue
+        sub = lambda t: re.sub(name, lambda r: params[r.group(0)], t)  # noqa: E731
+        a_p, b_p = params[m.group(1)], sub(b_text)
+        hoisted.append(f"md_exp_cut({a_p}, {b_p})")
+        out += [body[pos:m.start()],
+                f"md_add_exp({m.group(1)}, {b_text}, {body[e_open + 1:e_end - 1]}, p[NP + NU + {len(hoisted) - 1}])"]
+        pos = e_end
+    return "".join(out) + body[pos:]
+
+
+#: a + b exp(e) and the cut below which it rounds to a (see _exp_tails)
+_ADD_EXP = """/* a + b exp(e), with exp() skipped where the sum rounds to a exactly: for a > 0 and
+   e < cut = log(a / |b|) - 56 log 2, |b exp(e)| < a 2^-56 (with exp's and log's rounding,
+   below a 2^-55), less than half an ulp of a, so a + b exp(e) == a in round-to-nearest.
+   cut = -inf (never skipped) unless a > 0 and b != 0 are finite. */
+static inline double md_exp_cut(double a, double b) {
+    return (a > 0.0 && b != 0.0 && isfinite(a) && isfinite(b)) ? log(a / fabs(b)) - 56.0 * 0.6931471805599453 : -INFINITY;
+}
+static inline double md_add_exp(double a, double b, double e, double cut) {
+    return e < cut ? a : a + b * exp(e);
+}
+"""
+
+
+def _equations(exported: dict) -> tuple[str, int, list[str]]:
+    """(the generated C with rhs's sin/cos rotated and its exp tails cut, NROT: the number
+    of rotation slots, the parameter-only expressions hoisted out of rhs: p[NP + NU + k])."""
     c = exported["c"]
     start = c.index("void rhs(")
     end = c.index("\n}\n", start) + 3
     slots: dict = {}
-    c = c[:start] + _rotated(c[start:end], slots) + c[end:]
-    rigid, select = _rigid_rhs({**exported, "c": c})
-    return c, rigid, select, len(slots)
+    hoisted: list[str] = []
+    c = c[:start] + _rotated(_exp_tails(c[start:end], hoisted), slots) + c[end:]
+    return c, len(slots), hoisted
 
 
 _ROTATION = """/* sin and cos of an angle from an exact libm pair at a nearby reference angle (one per
    distinct argument, in the workspace): sin(r + d) = s_r cos d + c_r sin d with the Taylor
-   series of cos d, sin d to d^6, exact to rounding for |d| <= 1e-4 rad (truncation below
-   1e-28); a new exact reference when |d| > 1e-4.  What the C FMU does with its step-start
-   rotation; it replaces four sin/cos evaluations per RK4 step by polynomials.  MD_SIN(k, a)
-   and MD_COS(k, a) evaluate the pair once per call of the function (locals md_s<k>, md_c<k>). */
+   series sin d = d - d^3/6, cos d = 1 - d^2/2 + d^4/24 for |d| <= 1e-4 rad (the terms left
+   out are below 8.4e-23 and 1.4e-27, far below the rounding of the result), a new exact
+   reference when |d| > 1e-4 (or at the first call: a NaN reference).  What the C FMU does
+   with its step-start rotation; it replaces the sin/cos evaluations of an RK4 step by
+   polynomials.  MD_SIN(k, a) and MD_COS(k, a) evaluate the pair once per call of the
+   function (locals md_s<k>, md_c<k>). */
 static inline void md_sincos(double *slot, double a, double *s, double *c) {
-    double d = a - slot[0];
-    if (slot[3] == 0.0 || !(fabs(d) <= 1e-4)) {
-        slot[0] = a; slot[1] = sin(a); slot[2] = cos(a); slot[3] = 1.0;
+    const double d = a - slot[0];
+    if (!(fabs(d) <= 1e-4)) {
+        slot[0] = a; slot[1] = sin(a); slot[2] = cos(a);
         *s = slot[1]; *c = slot[2];
         return;
     }
     const double d2 = d * d;
-    const double sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
-    const double cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
+    const double sd = d - d * d2 * (1.0 / 6.0);
+    const double cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0));
     *s = slot[1] * cd + slot[2] * sd;
     *c = slot[2] * cd - slot[1] * sd;
 }
-#define MD_SIN(k, a) (md_have##k ? md_s##k : (md_sincos(w + MD_ROT_OFFSET + 4 * (k), (a), &md_s##k, &md_c##k), md_have##k = 1, md_s##k))
-#define MD_COS(k, a) (md_have##k ? md_c##k : (md_sincos(w + MD_ROT_OFFSET + 4 * (k), (a), &md_s##k, &md_c##k), md_have##k = 1, md_c##k))
+#define MD_SIN(k, a) (md_have##k ? md_s##k : (md_sincos(w + MD_ROT_OFFSET + 3 * (k), (a), &md_s##k, &md_c##k), md_have##k = 1, md_s##k))
+#define MD_COS(k, a) (md_have##k ? md_c##k : (md_sincos(w + MD_ROT_OFFSET + 3 * (k), (a), &md_s##k, &md_c##k), md_have##k = 1, md_c##k))
 """
 
 
@@ -373,31 +498,73 @@ def _pruned_observe(c: str, keep: set[int]) -> str:
 
 
 def generated_c(exported: dict) -> str:
+    """The C the FMU compiles (``generated.c``): the exporter's code with rhs's sin/cos
+    rotated and observe() pruned to the FMU's outputs, ``md_rhs_sw`` (rhs with the switches
+    as arguments), one RK4 loop per switch combination (``MD_RK4``, chosen by
+    ``md_variant(p)``) and a generic loop (``md_rk4_generic``, the switches read from ``p``),
+    and ``md_dependent`` (the dependent parameters)."""
+    import itertools
+
     body = [f"    p[{k}] = {exported['parameters'][k]['c']};  /* {exported['parameters'][k]['name']} */"
             for k in exported["dependent_order"]]
-    c, rigid, select, nrot = _equations(exported)
+    c, nrot, hoisted = _equations(exported)
     c = _pruned_observe(c, {x["slot"] for x in table(exported)["variables"] if x["causality"] == "output"})
-    if rigid:
-        test = " && ".join(f"p[{k}] == {v!r}" for k, v in select)
-        active = rigid_active_states(rigid, exported)
-        fast = ["/* The rigid configuration's rhs: the generated rhs with its switches constant. */",
-                rigid, "#define HAVE_RHS_RIGID 1",
-                "/* the states it can change (the others keep their values: derivative 0) */",
-                f"#define N_RIGID_ACTIVE {len(active)}",
-                "static const int RIGID_ACTIVE[N_RIGID_ACTIVE] = {" + ", ".join(map(str, active)) + "};",
-                "static int md_is_rigid(const double *p) {", f"    return {test};", "}", ""]
+    rhs, names, slots = _switched_rhs(c, exported)
+    n = _n_joints(exported)
+    loops, table_, values = [], [], []
+    if rhs:
+        for k, bits in enumerate(itertools.product((0, 1), repeat=len(SWITCHES))):
+            v = switch_values(bits, n)
+            values.append([v[x] for x in names])
+            on = ", ".join(f"{x}={int(v[x])}" for x in SWITCHES)
+            loops += [f"/* variant {k}: {on} */",
+                      *_rk4_loop(f"md_rk4_v{k}", ", ".join(repr(v[x]) for x in names), active_states(rhs, exported, v))]
+            table_.append(f"md_rk4_v{k}")
+        generic = _rk4_loop("md_rk4_generic", ", ".join(f"p[{k}]" for k in slots), list(range(len(exported["states"]))))
+    else:  # no switches to specialise on: the generated rhs, always inlined, over every state
+        start = c.index("void rhs(")
+        rhs = "static inline __attribute__((always_inline)) void md_rhs_sw(" + c[start + len("void rhs("):c.index("\n}\n", start) + 3]
+        generic = _rk4_loop("md_rk4_generic", "", list(range(len(exported["states"]))))
+        generic = [line.replace(", )", ")") for line in generic]
+    nv = len(table_)
+    select = ["/* The loop of the switch combination the parameters give (-1: none, the generic loop). */",
+              f"#define MD_NVARIANT {nv}"]
+    if nv:
+        select.insert(0, "#ifndef MD_FORCE_GENERIC  /* -DMD_FORCE_GENERIC (tests): the generic loop only */")
+        select += [f"static const int MD_SW_SLOT[{len(slots)}] = {{" + ", ".join(map(str, slots)) + "};",
+                   f"static const double MD_SW_VALUE[MD_NVARIANT][{len(slots)}] = {{",
+                   *("    {" + ", ".join(repr(x) for x in row) + "}," for row in values), "};",
+                   "static int (*const MD_RK4[MD_NVARIANT])(Snapshot *, long long) = {"
+                   + ", ".join(table_) + "};",
+                   "static int md_variant(const double *p) {",
+                   "    for (int v = 0; v < MD_NVARIANT; v++) {",
+                   "        int k = 0;",
+                   f"        while (k < {len(slots)} && p[MD_SW_SLOT[k]] == MD_SW_VALUE[v][k]) k++;",
+                   f"        if (k == {len(slots)}) return v;",
+                   "    }",
+                   "    return -1;",
+                   "}",
+                   "#else",
+                   "static int (*const MD_RK4[1])(Snapshot *, long long) = {0};",
+                   "static int md_variant(const double *p) { (void)p; return -1; }",
+                   "#endif"]
     else:
-        fast = ["#define HAVE_RHS_RIGID 0", ""]
+        select += ["static int (*const MD_RK4[1])(Snapshot *, long long) = {0};",
+                   "static int md_variant(const double *p) { (void)p; return -1; }"]
     return "\n".join([
         f"/* The equations of {exported['model']}, generated by {exported['generator']}. */",
         "#if defined(__GNUC__)", "#pragma GCC diagnostic ignored \"-Wunused-parameter\"",
         "#pragma GCC diagnostic ignored \"-Wunused-variable\"",
         "#pragma GCC diagnostic ignored \"-Wunused-but-set-variable\"",
         "#pragma GCC diagnostic ignored \"-Wunused-function\"", "#endif",
-        "#include <math.h>", f"#define MD_ROT_OFFSET (NOBS + 1)", _ROTATION,
-        c, *fast,
+        "#include <math.h>", f"#define MD_ROT_OFFSET (NOBS + 1)", _ROTATION, _ADD_EXP,
+        c, "/* The generated rhs with the effect switches as arguments (constants in the loops). */", rhs,
+        "/* The RK4 loops, one per combination of the switches (the states it can change only). */",
+        *(["#ifndef MD_FORCE_GENERIC", *loops, "#endif"] if loops else []), *generic, *select, "",
         "/* The dependent (calculated) parameters, from the model's bindings, in evaluation order. */",
-        "static void md_dependent(double *p) {", *body, "}", ""])
+        "static void md_dependent(double *p) {", *body,
+        "    /* parameter-only expressions of rhs, hoisted (after the inputs) */",
+        *(f"    p[NP + NU + {k}] = {e};" for k, e in enumerate(hoisted)), "}", ""])
 
 
 def _fmt(x) -> str:

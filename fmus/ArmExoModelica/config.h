@@ -15,9 +15,10 @@
 #define NX_MAX NX
 
 typedef struct {
-    double p[NP + NU];      /* parameters in the generated code's order, then the inputs */
-    double w[NOBS + 1 + 4 * NROT]; /* the generated code's workspace, then the sin/cos references */
-    int rigid;              /* the rigid configuration: use rhs_rigid */
+    double p[NP + NU + NHOIST]; /* parameters in the generated code's order, the inputs, the
+                                   parameter-only expressions hoisted out of rhs */
+    double w[NOBS + 1 + 3 * NROT]; /* the generated code's workspace, then the sin/cos references */
+    int variant;            /* the RK4 loop of the effect switches' combination (MD_RK4), -1: generic */
 } ModelData;
 
 #endif
