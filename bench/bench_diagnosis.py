@@ -29,13 +29,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
-import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages
+import numpy as np  # noqa: E402
 
-from diagnosis.report import _clean
-from diagnosis import catalogue as cat
+from diagnosis.report import _clean  # noqa: E402
+from diagnosis import catalogue as cat  # noqa: E402
 from diagnosis.validation import SetSpec, draw_specs, make_set, nominal_gap, run_validation
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -182,9 +184,19 @@ def position_run(args) -> int:
                                    n_outside=max(args.outside, 4),
                                    duration_s=args.position_duration)
     specs = sorted(specs, key=lambda s: int(s.name.rsplit("-", 1)[1]))  # round robin
+    if args.long_delays:
+        work = Path(args.work + "_position_long_delays")
+        specs = pv.long_delay_specs(args.position_duration)
     t0 = time.perf_counter()
     result = pv.run_position_validation(specs, work, workers=args.position_workers,
                                         via=args.via, score_only=args.score_only)
+    if args.long_delays:
+        out = {"summary": result["summary"], "rows": result["rows"],
+               "settings": dict(vars(args), work=work.name)}
+        (RESULTS / "diagnosis_position_long_delays.json").write_text(
+            json.dumps(_clean(out), indent=2))
+        print(result["table_markdown"])
+        return 0
     timing = position_timing(work)
     s = result["summary"]
     table = result["table_markdown"] + (
@@ -252,6 +264,9 @@ def main(argv=None) -> int:
     p.add_argument("--position", action="store_true",
                    help="the position-servo validation (writes "
                         "bench/results/diagnosis_position*.json/md)")
+    p.add_argument("--long-delays", action="store_true",
+                   help="with --position: only the 8 sets of 30-40 ms channel delays "
+                        "(writes bench/results/diagnosis_position_long_delays.json)")
     p.add_argument("--position-duration", type=float, default=30.0,
                    help="position trial length [s]")
     p.add_argument("--position-workers", type=int, default=2,

@@ -34,7 +34,10 @@ def _row(name, report, wall, cpu):
     red = report.gap.get("named_held_out_reduction")
     return {"recording": name, "verdict": report.verdict, "named": report.named,
             "fitted": report.fitted, "intervals_95": report.intervals,
-            "held_out_reduction": red, "nominal_gap_features": report.gap["nominal_all"],
+            "held_out_reduction": red,
+            "nominal_gap_features": report.gap.get("features", report.gap)["nominal_all"],
+            "nominal_gap_limbfit": report.gap["nominal_all"] if "features" in report.gap
+            else None,
             "K": report.arm["K_h"][0][0], "B": report.arm["B_h"][0][0],
             "I": report.arm["M_h"][0][0], "r2": report.arm["r2"][0][0],
             "conventions": [c["name"] for c in report.conventions],

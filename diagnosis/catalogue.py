@@ -59,6 +59,12 @@ class Parameter:
         significance threshold, so a validation set drawn there is reported but not
         counted as a miss, and a pair's second effect fitted there is not named
         (core._pair_earns_second). None: no floor measured inside the search range.
+    physical_low : bool
+        The lower bound is a physical limit (not flagged "at search bound").
+    draw_log : bool
+        Draw the realistic magnitude log-uniformly although the search is linear (a
+        parameter whose search range straddles ``off``, e.g. a channel delay of either
+        sign).
     """
 
     name: str
@@ -70,6 +76,7 @@ class Parameter:
     scored: bool = True
     detectable_from: float | None = None
     physical_low: bool = False
+    draw_log: bool = False
 
     def search_bound_hit(self, value: float, tol: float = BOUND_TOLERANCE) -> str | None:
         """``"lower"``/``"upper"`` when ``value`` lies on (within ``tol`` of the search
@@ -149,7 +156,7 @@ class Effect:
             lo, hi = p.realistic
             if self.fit == "integer":
                 out[p.name] = int(rng.integers(int(lo), int(hi) + 1))
-            elif p.log:
+            elif p.log or p.draw_log:
                 out[p.name] = float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
             else:
                 out[p.name] = float(rng.uniform(lo, hi))
@@ -223,7 +230,9 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
             _p("frequency_hz", "Hz", (4.0, 10.0), (1.0, 45.0))),
            fit="limbfit", kinds=("position",)),
     Effect("channel_delay", "the torque channel lags (or leads) the angle channel",
-           (_p("delay_s", "s", (0.002, 0.008), (-0.05, 0.05), log=False),),
+           # realistic: anti-alias filters (a few ms) up to unsynchronised acquisition or
+           # buffering of one channel (tens of ms); magnitudes drawn log-uniformly
+           (_p("delay_s", "s", (0.002, 0.04), (-0.1, 0.1), log=False, draw_log=True),),
            fit="limbfit", kinds=("position",), sign_choice=True),
     Effect("servo_bandwidth",
            "the servo tracks theta_ref through a 2nd-order low-pass (damping 0.7); seen "

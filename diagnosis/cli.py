@@ -79,10 +79,12 @@ def _diagnose(args) -> int:
         head = "" if condition is None else f"[{condition}] "
         print(f"{head}verdict: {one.verdict}{': ' + named if named else ''}")
         print(one.summary)
-        fm = one.gap.get("fit_measure")
-        if fm:  # an experiment with its own fit measure (position servo: limbfit)
-            print(f"{head}nominal gap {fm['g0_all']:.3g} (threshold {fm['threshold']:.3g}, "
-                  f"{fm['measure'].split(':')[0]}); feature gap {one.gap['nominal_all']:.3g}")
+        feat = one.gap.get("features")
+        if feat:  # an experiment with its own fit measure (position servo: limbfit)
+            print(f"{head}nominal gap {one.gap['nominal_all']:.3g} (threshold "
+                  f"{one.gap['significance_threshold']:.3g}, "
+                  f"{one.gap['measure'].split(':')[0]}); feature gap "
+                  f"{feat['nominal_all']:.3g} (threshold {feat['significance_threshold']:.3g})")
         else:
             print(f"{head}nominal gap {one.gap['nominal_all']:.3g} (threshold "
                   f"{one.gap['significance_threshold']:.3g})")

@@ -208,3 +208,78 @@ def _low_frequency_opposed(arm) -> bool:
             return False
     return True
 
+
+
+# ----------------------------------------------------------------------------- units
+#: typical magnitudes (RMS of the deviation) the diagnosis's fixed constants are set for
+TYPICAL_RMS = {"theta": 0.01, "tau_h": 1.0}     # [rad], [N m]
+UNITS_UNIT = {"theta": "rad", "tau_h": "N m"}
+#: within this factor of the typical RMS the numbers are used as they are
+UNITS_TOLERANCE = 2.0 ** 8
+#: an RMS below this (subnormal territory of float64) cannot be rescaled exactly
+UNITS_SMALLEST = 2.0 ** -960
+
+
+def _rms(x) -> float:
+    """RMS of the deviation of x from its mean, without overflow or underflow: computed
+    on x / max|x| (every float64 number, 1e-300 to 1e300, gives a finite result)."""
+    x = np.asarray(x, dtype=float)
+    m = float(np.max(np.abs(x))) if x.size else 0.0
+    if m == 0 or not math.isfinite(m):
+        return m
+    y = x / m
+    return m * float(np.sqrt(np.mean((y - y.mean(axis=0)) ** 2)))
+
+
+def normalise_units(trials, source_of=None) -> tuple[list, dict | None, list]:
+    """Angles and torques far from the magnitudes the diagnosis's constants are set for
+    (``TYPICAL_RMS``, beyond a factor ``UNITS_TOLERANCE``): the trials are divided by
+    a power of two per signal (exact in floating point), so that their RMS is near the
+    typical one, and diagnosed in those units; the report gives its values back in the
+    file's units (pipeline.report). Data of every float64 magnitude then give the
+    verdict they give at the typical magnitude (a squared 1e80 N m overflows; a
+    1e-6 rad angle's spectra underflow the fixed floors).
+
+    Returns (trials, units, findings): ``units`` {signal: divisor} (theta_ref shares
+    theta's) or None when nothing was rescaled; the finding is a storage-like note that
+    never changes the verdict.
+
+    Raises
+    ------
+    DiagnosisInputError
+        An RMS below ``UNITS_SMALLEST`` (subnormal numbers: no exact rescaling), naming
+        the trial (its file when ``source_of`` gives it), the signal and the value.
+    """
+    from .errors import DiagnosisInputError
+    units, evidence = {}, []
+    for s, typical in TYPICAL_RMS.items():
+        per = {t.name: _rms(t.signal(s)) for t in trials}
+        worst = min(per, key=per.get)
+        if 0 < per[worst] < UNITS_SMALLEST:
+            where = source_of(worst) if source_of else worst
+            raise DiagnosisInputError(
+                f"{where}: {s} has an RMS of {per[worst]:.3g} {UNITS_UNIT[s]}, below "
+                f"{UNITS_SMALLEST:.3g}: too small for float64 to rescale exactly; store it "
+                f"in larger units")
+        rms = float(np.exp(np.mean(np.log([v for v in per.values() if v > 0] or [typical]))))
+        ratio = rms / typical
+        if 1.0 / UNITS_TOLERANCE <= ratio <= UNITS_TOLERANCE:
+            continue
+        units[s] = 2.0 ** round(math.log2(ratio))
+        evidence.append(f"{s} RMS {rms:.3g} {UNITS_UNIT[s]} (typical {typical:g}): "
+                        f"diagnosed in {s} / 2^{round(math.log2(ratio))}")
+    if not units:
+        return list(trials), None, []
+    a, b = 1.0 / units.get("theta", 1.0), 1.0 / units.get("tau_h", 1.0)
+    out = []
+    for t in trials:
+        scale, arrays = {"theta": a, "tau_h": b}, {"theta": t.theta * a, "tau_h": t.tau_h * b}
+        if getattr(t, "theta_ref", None) is not None:
+            scale["theta_ref"], arrays["theta_ref"] = a, t.theta_ref * a
+        out.append(_replace(t, scale=scale, **arrays))
+    finding = Finding("units rescaled", "all trials",
+                      "; ".join(evidence) + " (a power of two: exact); values reported in "
+                      "the file's units, figures in the rescaled ones", note=True)
+    units.setdefault("theta", 1.0)
+    units.setdefault("tau_h", 1.0)
+    return out, units, [finding]

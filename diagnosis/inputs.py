@@ -70,6 +70,7 @@ def load_trials(source, *, min_samples: int = tf.MIN_SAMPLES,
     trials = []
     read = []
     for path in trial_paths(source):
+        n_before = len(read)
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
@@ -83,6 +84,9 @@ def load_trials(source, *, min_samples: int = tf.MIN_SAMPLES,
             if not found:
                 raise DiagnosisInputError(str(exc)) from None
             read.extend(found)
+        for trial in read[n_before:]:
+            check_signals(trial, path)
+            trial._source = source_label(trial, path)
     for trial in read:
         for key in HIDDEN_KEYS:
             trial.meta.pop(key, None)
@@ -99,6 +103,43 @@ def load_trials(source, *, min_samples: int = tf.MIN_SAMPLES,
     if check:
         check_consistent(trials)
     return trials
+
+
+#: signal -> unit, of the measured signals a diagnosis compares (a constant one is refused)
+MEASURED_UNITS = {"theta": "rad", "tau_h": "N m", "theta_ref": "rad"}
+
+
+def source_label(trial, path) -> str:
+    """The file a trial came from, as the user gave it (``FILE:NAME`` for one trial of a
+    .mat of several)."""
+    if Path(path).suffix.lower() == ".mat" and trial.name != Path(path).stem:
+        return f"{path}:{trial.name}"
+    return str(path)
+
+
+def check_signals(trial, path) -> None:
+    """Refuse a trial with a measured channel that is constant (every sample equal):
+    an angle or torque that never changes carries no response to diagnose, and the
+    spectral estimates divide by its zero power.
+
+    Raises
+    ------
+    DiagnosisInputError
+        ``"FILE: tau_h[1] is constant (0 N m): nothing to diagnose"`` (file as given,
+        the channel 1-based, its value and unit; ``FILE:NAME`` for a trial of a .mat of
+        several).
+    """
+    where = source_label(trial, path)
+    for s, unit in MEASURED_UNITS.items():
+        x = getattr(trial, s, None)
+        if x is None:
+            continue
+        x = np.asarray(x, dtype=float).reshape(len(x), -1)
+        for j in range(x.shape[1]):
+            if x.shape[0] and np.all(x[:, j] == x[0, j]):
+                raise DiagnosisInputError(
+                    f"{where}: {s}[{j + 1}] is constant ({x[0, j]:.6g} {unit}): nothing to "
+                    f"diagnose")
 
 
 def split_conditions(trials) -> dict:

@@ -167,16 +167,18 @@ class _Prepared:
         self.noise_tau = _white_level(rec.tau, rec.fs)
         self.noise_theta = _white_level(rec.theta, rec.fs)
 
-    def lp(self, x):
+    def lp(self, x, decimate: bool = True):
         """Zero-phase low-pass (forwards and backwards, odd extension of 0.5 s at each
-        end, each pass started at its first value), every D-th sample kept."""
+        end, each pass started at its first value), every D-th sample kept (all with
+        ``decimate=False``)."""
         pad = min(x.shape[0] - 1, int(0.5 * self.fs))
         ext = np.concatenate([2 * x[:1] - x[pad:0:-1], x, 2 * x[-1:] - x[-2:-pad - 2:-1]])
         zi = self._zi.reshape(self._zi.shape + (1,) * (ext.ndim - 1))
         y, _ = signal.sosfilt(self.sos, ext, axis=0, zi=zi * ext[:1])
         y = y[::-1]
         y, _ = signal.sosfilt(self.sos, y, axis=0, zi=zi * y[:1])
-        return y[::-1][pad:pad + x.shape[0]][::self.D]
+        y = y[::-1][pad:pad + x.shape[0]]
+        return y[::self.D] if decimate else y
 
     def intrinsic_raw(self, scale=None):
         """Raw (N, n, 3 n^2) columns of K, B, I entries (K columns scaled)."""
@@ -203,7 +205,12 @@ class _Prepared:
 
     def _base_columns(self):
         raw = self.intrinsic_raw()
-        return self.lp(raw.reshape(self.N, -1)).reshape((self.Nd,) + raw.shape[1:])
+        # kept at the full rate too: the torque-channel effects (a sensor low-pass, a
+        # channel delay) are linear and time-invariant, so they commute with the
+        # analysis low-pass and are applied to these columns directly (the edges, where
+        # the two orders differ, are left out of every fit)
+        self.base_full = self.lp(raw.reshape(self.N, -1), decimate=False)
+        return self.base_full[::self.D].reshape((self.Nd,) + raw.shape[1:])
 
     def columns(self, name: str | None, params: dict):
         """Low-passed design columns (N, n, p) shared across records, for the effect
@@ -225,6 +232,9 @@ class _Prepared:
                 ex = self.lp(np.stack(extra, axis=2).reshape(self.N, -1))
                 cols = np.concatenate([cols, ex.reshape(self.Nd, self.n, -1)], axis=2)
             return cols
+        if channel:
+            out = lm.channel_apply(self.base_full, self.fs, eff)[::self.D]
+            return out.reshape(self.base.shape)
         scale = lm.stiffness_scale(self.rec.theta, self.fs, eff) if scaled else None
         raw = self.intrinsic_raw(scale)
         if channel:
@@ -395,13 +405,28 @@ def _from_x(p, x):
     return lo + x * (hi - lo)
 
 
-def _grid(p, n):
+def _grid(p, n, band_hz=None):
+    """Grid points of parameter p (n per search span; see the channel delay).
+
+    A channel delay (``delay_s`` searched on both sides of 0) gets points dense near zero
+    (log-spaced from 0.2 ms) and then at most 1 / (8 band_hz) apart up to the bounds: the
+    misfit of a delay error is unimodal only within about a quarter period of the
+    analysis band's highest frequency, so a coarser grid (6 log-spaced points per sign,
+    the first version) missed the basin of a 30-40 ms delay and another effect was named.
+    """
     lo, hi = p.bounds
     if p.log:
         return np.exp(np.linspace(math.log(lo), math.log(hi), n))
-    if p.name == "delay_s" and lo < 0 < hi:  # channel delay: dense near zero, both signs
-        g = np.exp(np.linspace(math.log(2e-4), math.log(hi), n // 2))
-        return np.concatenate([-g[::-1], [0.0], g])
+    if p.name == "delay_s" and lo < 0 < hi:
+        top = min(-lo, hi)
+        step = top / max(1, n // 2) if band_hz is None else min(top / max(1, n // 2),
+                                                                  1.0 / (8.0 * band_hz))
+        small = np.exp(np.linspace(math.log(2e-4), math.log(step), 4))[:-1]
+        big = np.linspace(step, top, max(1, int(math.ceil(top / step - 1e-9))))
+        g = np.concatenate([small, big])
+        pos = g if hi <= top else np.concatenate([g, np.arange(top + step, hi, step)])
+        neg = g if -lo <= top else np.concatenate([g, np.arange(top + step, -lo, step)])
+        return np.concatenate([-neg[::-1], [0.0], pos])
     return np.linspace(lo, hi, n)
 
 
@@ -451,8 +476,10 @@ class _Problem:
             return np.zeros(0)
         if start is not None:
             return self._refine(np.asarray(start, float), maxiter=15 * len(self.nl))
+        band = min(pr.band for pr in self.preps)
         grids = [_grid(p, self.cfg.grid if len(self.nl) == 1 else
-                       max(6, int(self.cfg.grid * (1.3 if p.name == "delay_s" else 0.7))))
+                       max(6, int(self.cfg.grid * (1.3 if p.name == "delay_s" else 0.7))),
+                       band)
                  for p in self.nl]
         pts = np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(grids), -1).T
         vals = [self.evaluate({**self.fixed, **{p.name: v for p, v in zip(self.nl, pt)}})[0]
@@ -619,6 +646,40 @@ def fit_effect(preps, name: str, nominal: dict, cfg: FitConfig = FitConfig(), *,
     fit = EffectFit(name, out_params, ci, limb, obj, g_cal.value, g_held.value,
                     reduction, bound, n_eval)
     fit._problem = (prob, x, lin)
+    return fit
+
+
+def fit_record(fit: EffectFit) -> dict:
+    """A JSON-able record of a fit made by :func:`fit_effect` (for a resume store):
+    everything :func:`fit_from_record` needs to give it back bit for bit, including the
+    search coordinates its jackknife intervals start from."""
+    prob, x, lin = fit._problem
+    d = fit.as_dict()
+    d.update(x=[float(v) for v in np.atleast_1d(x)], lin={k: float(v) for k, v in lin.items()},
+             fixed=dict(prob.fixed))
+    return d
+
+
+def fit_from_record(preps, d: dict, nominal: dict, cfg: FitConfig = FitConfig()) -> EffectFit:
+    """The fit of :func:`fit_record` on the same ``preps`` and ``nominal`` (a resumed
+    diagnosis), ready for :func:`add_intervals`.
+
+    Raises
+    ------
+    KeyError, ValueError, TypeError
+        A record of another layout (the store then runs the fit again).
+    """
+    name = d["effect"]
+    fit = EffectFit(name, dict(d["params"]), d["intervals"],
+                    lm.LimbModel(d["K"], d["B"], d["I"]), float(d["calibration_objective"]),
+                    float(d["calibration_gap"]), float(d["held_out_gap"]),
+                    None if d["held_out_reduction"] is None else float(d["held_out_reduction"]),
+                    list(d["at_search_bound"]), int(d["n_evaluations"]))
+    prob = _Problem(preps, name, d["fixed"], cfg, nominal["solution"].cal_energy)
+    x = np.asarray(d["x"], dtype=float)
+    if x.shape != (len(prob.nl),):
+        raise ValueError(f"record of {name!r} has {x.size} coordinates, not {len(prob.nl)}")
+    fit._problem = (prob, x, {k: float(v) for k, v in d["lin"].items()})
     return fit
 
 

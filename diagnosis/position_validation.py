@@ -179,7 +179,8 @@ def draw_position_specs(rng: np.random.Generator, *, n_per_effect: int = 2,
         for i in range(n_per_effect):
             c = common(i)
             specs.append(PositionSetSpec(f"pos{c['n_dof']}-{name}-{i}",
-                                         ((name, effect.draw(rng)),),
+                                         ((name, _stratified(effect, effect.draw(rng), i,
+                                                             n_per_effect)),),
                                          record_ref=(name == "servo_bandwidth" or i % 2 == 1),
                                          **c))
     for i in range(n_nominal):
@@ -193,6 +194,41 @@ def draw_position_specs(rng: np.random.Generator, *, n_per_effect: int = 2,
                                      outside={"name": name, "params": draw_outside(rng, name)},
                                      **c))
     return specs
+
+
+def _stratified(effect, params: dict, i: int, n: int) -> dict:
+    """A parameter drawn log-uniformly over a wide magnitude range (``draw_log``: the
+    channel delay, 2-40 ms) moved into the i-th of n equal strata of its log range, from
+    the same uniform number (no other draw changes): every part of the range is
+    exercised, its long end (a 30-40 ms delay, where the first search failed) included,
+    whatever the seed."""
+    out = dict(params)
+    for p in effect.parameters:
+        if not p.draw_log or n < 2:
+            continue
+        lo, hi = p.realistic
+        v = out[p.name]
+        sign = -1.0 if v < p.off else 1.0
+        u = math.log(abs(v - p.off) / lo) / math.log(hi / lo)
+        out[p.name] = float(p.off + sign * lo * (hi / lo) ** ((i % n + u) / n))
+    return out
+
+
+#: (delay [s], joints) of the long-channel-delay check (bench --long-delays)
+LONG_DELAYS = ((0.030, 1), (-0.035, 1), (0.040, 1), (0.032, 2), (-0.038, 2), (0.036, 1),
+               (-0.030, 1), (0.039, 2))
+
+
+def long_delay_specs(duration_s: float = 30.0) -> list[PositionSetSpec]:
+    """Eight sets with a pure 30-40 ms channel delay of either sign (one and two joints,
+    four representations, theta_ref in half): the long end of the realistic range,
+    where the first search named another effect."""
+    reps = ("float64", "sig7", "dec6", "float32_csv")
+    return [PositionSetSpec(f"pos{n}-channel_delay-long{i}", (("channel_delay",
+                                                             {"delay_s": d}),),
+                            n_dof=n, seed=500 + i, duration_s=duration_s,
+                            representation=reps[i % 4], record_ref=bool(i % 2))
+            for i, (d, n) in enumerate(LONG_DELAYS)]
 
 
 def draw_outside(rng: np.random.Generator, name: str) -> dict:

@@ -111,6 +111,7 @@ def _params(p: dict) -> str:
 def markdown(report) -> str:
     """The report page (Markdown)."""
     g = report.gap
+    m = measure_name(g)
     exp = report.experiment or {}
     lines = [f"# Sim-to-real gap diagnosis", "",
              f"Trials: {', '.join(report.trials)}", "",
@@ -128,13 +129,24 @@ def markdown(report) -> str:
                                      for k, v in d.items())
                 for e, d in report.intervals.items() if d), ""]
         lines += [
-                  f"Held-out gap {_fmt(g['nominal_held_out'])} -> {_fmt(g['named_held_out'])} "
-                  f"(reduction {_fmt(100 * g['named_held_out_reduction'], 3)} %); "
-                  f"all data {_fmt(g['nominal_all'])} -> {_fmt(g['named_all'])}.", ""]
-    lines += [f"Nominal gap, all data: {_fmt(g['nominal_all'])} (significant above "
+                  f"Held-out gap ({m}) {_fmt(g['nominal_held_out'])} -> "
+                  f"{_fmt(g['named_held_out'])} (reduction "
+                  f"{_fmt(100 * g['named_held_out_reduction'], 3)} %)"
+                  + (f"; all data {_fmt(g['nominal_all'])} -> {_fmt(g['named_all'])}"
+                     if g.get("named_all") is not None else "") + ".", ""]
+    lines += [f"Nominal gap ({m}), all data: {_fmt(g['nominal_all'])} (significant above "
               f"{_fmt(g['significance_threshold'])}); calibration {_fmt(g['nominal_calibration'])}, "
-              f"held out {_fmt(g['nominal_held_out'])}.", "",
-              "## Where (nominal model)", ""]
+              f"held out {_fmt(g['nominal_held_out'])}. The {m} gap is "
+              f"{g.get('measure', '').split(':', 1)[-1].strip() or 'the feature gap'}.", ""]
+    feat = g.get("features")
+    if feat:
+        lines += [f"Feature gap (another measure: the where stage's, from the FRF features "
+                  f"below; not comparable with the {m} gap the verdict uses): all data "
+                  f"{_fmt(feat['nominal_all'])} (significant above "
+                  f"{_fmt(feat['significance_threshold'])})"
+                  + (f", {_fmt(feat['named_all'])} with the named model"
+                     if feat.get("named_all") is not None else "") + ".", ""]
+    lines += ["## Where (nominal model; feature gap)", ""]
     if report.conventions:
         lines += ["Conventions and set-up mismatches (found in the files, corrected before "
                   "the diagnosis):", ""] + [f"- {c}" for c in report.where["conventions"]] + [""]
@@ -146,19 +158,22 @@ def markdown(report) -> str:
     w = report.where["nominal"]
     lines += [f"Coherent (FRF) share of the squared normalised differences: "
               f"{_fmt(100 * w['coherent_share'])} %.", "",
-              "| group | gap |", "|---|---|"]
+              "| group | feature gap |", "|---|---|"]
     for key in ("by_signal", "by_joint", "by_kind", "by_level"):
         for row in w[key]:
             label = ", ".join(f"{k}={v}" for k, v in row.items() if k != "gap")
             lines.append(f"| {label} | {_fmt(row['gap'])} |")
-    lines += ["", "Bands where it concentrates:", "", "| kind | signal | joint | band | gap |",
+    lines += ["", "Bands where it concentrates:", "",
+              "| kind | signal | joint | band | feature gap |",
               "|---|---|---|---|---|"]
     for row in w["top_bands"]:
         lines.append(f"| {row['kind']} | {row['signal']} | {row['joint']} | {row['band']} | "
                      f"{_fmt(row['gap'])} |")
     lines += ["", "## Which effect (each alone, fitted on the calibration data)", "",
               f"![ranking]({FIGURES['ranking']})", "",
-              "| rank | effect | fitted | calibration gap | held-out gap | held-out reduction | runs |",
+              f"Gaps in this table and in the figure: the {m} gap.", "",
+              f"| rank | effect | fitted | calibration gap ({m}) | held-out gap ({m}) | "
+              f"held-out reduction | runs |",
               "|---|---|---|---|---|---|---|"]
     for i, r in enumerate(report.ranking, 1):
         lines.append(f"| {i} | {' + '.join(r['effects'])} | {_params(r['params'])}{_bound(r)} | "
@@ -166,7 +181,8 @@ def markdown(report) -> str:
                      f"{_fmt(100 * r['held_out_reduction'])} % | {r['n_simulations']} |")
     if report.pairs:
         lines += ["", "Pairs of the top-ranked effects:", "",
-                  "| effects | fitted | calibration gap | held-out gap | held-out reduction |",
+                  f"| effects | fitted | calibration gap ({m}) | held-out gap ({m}) | "
+                  f"held-out reduction |",
                   "|---|---|---|---|---|"]
         for r in report.pairs:
             lines.append(f"| {' + '.join(r['effects'])} | {_params(r['params'])}{_bound(r)} | "
@@ -222,11 +238,11 @@ def _plot_where(report, path: Path) -> None:
         ax.set_xticks(range(len(cols)), [f"{k}\n{b}" for k, b in cols], rotation=90,
                       fontsize=7)
         ax.set_yticks(range(len(rows)), [f"{s}[{j}]" for s, j in rows])
-        ax.set_title(f"gap by band, {title}", fontsize=9)
+        ax.set_title(f"feature gap by band, {title}", fontsize=9)
         for (i, j), v in np.ndenumerate(grid):
             if np.isfinite(v) and v >= 1:
                 ax.text(j, i, f"{v:.0f}", ha="center", va="center", fontsize=6, color="w")
-    fig.colorbar(im, ax=axes[0].tolist(), label="log10(1 + gap)")
+    fig.colorbar(im, ax=axes[0].tolist(), label="log10(1 + feature gap)")
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
 
@@ -235,6 +251,21 @@ def _bound(row: dict) -> str:
     """Flag for a fit on a search bound (never named)."""
     flags = row.get("at_search_bound") or []
     return f" (at search bound: {'; '.join(flags)})" if flags else ""
+
+
+def measure_name(gap: dict) -> str:
+    """The short name of the measure of a report's top-level gaps (``features`` or an
+    experiment's own, e.g. ``limbfit``)."""
+    return (gap.get("measure") or "features").split(":")[0].strip()
+
+
+def ranking_lines(report) -> list:
+    """The reference lines of gap_ranking.png, [(value, label)]: in the measure of its
+    bars (the ranking's calibration and held-out gaps), never another one."""
+    g = report.gap
+    m = measure_name(g)
+    return [(g["nominal_held_out"], f"nominal, held out ({m})"),
+            (g["significance_threshold"], f"significance of the nominal gap ({m})")]
 
 
 def _plot_ranking(report, path: Path) -> None:
@@ -250,11 +281,13 @@ def _plot_ranking(report, path: Path) -> None:
             label="calibration (fit)")
     ax.barh(y + 0.2, np.minimum(np.nan_to_num(held, posinf=top), top), 0.4,
             label="held out")
-    ax.axvline(g["nominal_held_out"], color="k", ls="--", label="nominal, held out")
-    ax.axvline(g["significance_threshold"], color="r", ls=":", label="significance")
+    for (value, label), style in zip(ranking_lines(report), ({"color": "k", "ls": "--"},
+                                                              {"color": "r", "ls": ":"})):
+        ax.axvline(value, label=label, **style)
     ax.set_yticks(y, names, fontsize=8)
     ax.invert_yaxis()
-    ax.set_xlabel("gap (0 = explained; bars clipped; diverging models at the edge)")
+    ax.set_xlabel(f"{measure_name(g)} gap (0 = explained; bars clipped; diverging models "
+                  f"at the edge)")
     ax.legend(fontsize=7, loc="lower right")
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
@@ -325,7 +358,7 @@ def write_set_index(result, out_dir) -> Path:
         lines.append(f"| [{c}]({folder}/report.md) | {r.verdict} | {' + '.join(r.named) or '-'} | "
                      f"{_params(r.fitted) or '-'} | "
                      f"{'-' if red is None else _fmt(100 * red) + ' %'} | "
-                     f"{_fmt(r.gap['nominal_all'])} |")
+                     f"{_fmt(r.gap['nominal_all'])} ({measure_name(r.gap)}) |")
     lines += [""] + [f"- **{c}**: {r.summary}" for c, r in result.reports.items()] + [""]
     _atomic_text(out / "report.json", json.dumps(_clean(
         {"format": "arm-impedance-diagnosis-set/1",

@@ -105,7 +105,11 @@ def _round_sig(x, digits):
 
 
 def _is_integral(y) -> bool:
-    tol = np.maximum(1e-6, 16 * EPS * np.abs(y))
+    """Every y within a few ulps of an integer. The tolerance is relative (16 ulps, at
+    least those of 1): an absolute floor (1e-6, the first version) took every value
+    below 1e-6 for the integer 0, so a column of angles of 1e-7 rad printed with 17
+    digits was read as "0 decimals" and every simulated angle stored as 0."""
+    tol = 16 * EPS * np.maximum(np.abs(y), 1.0)
     return bool(np.all(np.abs(y - np.rint(y)) <= tol))
 
 
@@ -131,6 +135,11 @@ def detect_storage(x) -> Storage:
     nz = x[x != 0]
     if nz.size == 0 or np.ptp(x) == 0:
         return Storage("constant")
+    with np.errstate(over="ignore", invalid="ignore"):  # 1e80 in float32, 10^300: no fit
+        return _detect(x, nz)
+
+
+def _detect(x, nz) -> Storage:
     ax = np.abs(nz)
     e = np.floor(np.log10(ax))
     fits = []

@@ -40,6 +40,16 @@ class Experiment:
     declared_keys: tuple = ("fs", "n_dof")
     #: feature kinds compared (features.py)
     feature_kinds: tuple = ("frf", "noise", "static", "grid")
+    #: True: only the best-ranked fit can be named (pipeline.verdict.choose); False: the
+    #: best fit not flagged at a search bound
+    name_best_fit_only: bool = False
+    #: re-simulated through a plant FMU (``--fmu``, ``--rk4-step`` apply); False: the
+    #: experiment has its own model and refuses those options (pipeline.conventions)
+    uses_plant: bool = False
+    #: the model is linear in the scale of angles and torques (K, B, I and gains scale
+    #: with tau/theta): trials far from typical magnitudes are rescaled by a power of two
+    #: (conventions.normalise_units) and the report's values scaled back
+    scale_free: bool = False
 
     def __init__(self, trials):
         self.meta = trials[0].meta

@@ -30,6 +30,7 @@ class ExoskeletonIMBIC(Experiment):
     """
 
     kind = "exoskeleton"
+    uses_plant = True
     title = "exoskeleton under IMBIC, torque perturbation (plant FMU, orchestrator)"
     declared_keys = ("fs", "n_dof", "posture_deg", "controller", "sensors", "robot",
                      "friction")

@@ -37,6 +37,9 @@ class PositionServo(Experiment):
     title = "position servo imposes the angle, torque sensor between actuator and limb"
     declared_keys = ("fs", "n_dof")
     feature_kinds = ("frf",)
+    #: only the best fit can be named (pipeline.verdict.choose; as limbfit's verdict)
+    name_best_fit_only = True
+    scale_free = True
 
     @classmethod
     def accepts(cls, trials) -> bool:
@@ -83,12 +86,17 @@ class PositionServo(Experiment):
         return simulate
 
     # ------------------------------------------------------------------ fits
-    def fit_effects(self, trials, effects, config):
+    def fit_effects(self, trials, effects, config, store=None):
         """Which / how far for a position experiment: every applicable effect fitted by
         variable projection (diagnosis.limbfit: K, B, I and the effect's gain-like
         parameters linear, the others searched), calibrated on the first
         ``config.time_split_fraction`` of every trial, its gap on the rest (held out);
         95 % jackknife intervals for the best fit.
+
+        ``store`` (pipeline.resume.ResumeStore, optional): every finished fit, and the
+        best fit's intervals, are written to it atomically as they finish and read back
+        by a re-run with the same inputs and options (the store's key), which then fits
+        only what is missing and gives the same report.
 
         Returns
         -------
@@ -108,10 +116,23 @@ class PositionServo(Experiment):
         significant = bool(g["all"].significant(cfg))
         # effects are fitted only when there is a gap to explain (as limbfit does)
         names = lf.candidates(preps, effects) if effects and significant else []
-        fits = [lf.fit_effect(preps, nm, nominal, cfg, intervals=False) for nm in names]
+        fits = [_resumable(store, ("limbfit", nm, repr(cfg)),
+                           lambda nm=nm: lf.fit_effect(preps, nm, nominal, cfg,
+                                                       intervals=False),
+                           lf.fit_record,
+                           lambda d: lf.fit_from_record(preps, d, nominal, cfg))
+                for nm in names]
         fits.sort(key=lambda f: f.calibration_objective)
         if fits and cfg.n_jackknife >= 2:
-            lf.add_intervals(fits[0], cfg)
+            best = fits[0]
+
+            def jackknife():
+                lf.add_intervals(best, cfg)
+                return {"intervals": best.intervals, "n": best.n_evaluations}
+            ci = _resumable(store, ("limbfit-jackknife", best.effect, repr(cfg)), jackknife,
+                            lambda d: d,
+                            lambda d: {"intervals": dict(d["intervals"]), "n": int(d["n"])})
+            best.intervals, best.n_evaluations = ci["intervals"], int(ci["n"])
         out = []
         for f in fits:
             fit = EffectFit((f.effect,), {f.effect: dict(f.params)}, f.calibration_gap,
@@ -129,6 +150,24 @@ class PositionServo(Experiment):
                 "measure": "limbfit: band energy of the torque residual above the noise "
                            "floor, relative to the torque energy (diagnosis.limbfit)",
                 "nominal_limb": model_of(nominal["limb"], trials[0].fs, "limbfit nominal")}
+
+
+def _resumable(store, key, compute, to_json, from_json):
+    """``compute()``, or its result read back from ``store`` under ``key`` (a re-run of
+    the same diagnosis); a result computed is stored at once (atomically)."""
+    if store is None:
+        return compute()
+    found = store.get_json(key)
+    if found is not None:
+        try:
+            value = from_json(found)
+            store.n_reused += 1
+            return value
+        except (KeyError, ValueError, TypeError):
+            pass  # another layout: fit again
+    value = compute()
+    store.put_json(key, to_json(value))
+    return value
 
 
 def limb_of(model):

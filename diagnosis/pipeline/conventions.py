@@ -4,13 +4,16 @@ once per trial), and the experiment that made the trials (diagnosis.experiments)
 
 from __future__ import annotations
 
-from ..conventions import apply_declared, check_angles, check_time
+from ..conventions import apply_declared, check_angles, check_time, normalise_units
+from ..errors import DiagnosisInputError
 from ..evaluation import storage_context
 from ..experiments import experiment_for
 
 
 def run(r) -> None:
-    """Correct ``r.trials``, fill ``r.findings``, ``r.experiment``, ``r.effects``."""
+    """Correct ``r.trials``, fill ``r.findings``, ``r.experiment``, ``r.effects``,
+    ``r.units``."""
+    sources = {t.name: getattr(t, "_source", t.name) for t in r.trials}
     trials, findings = apply_declared(r.trials)
     trials, found = check_angles(trials)
     findings += found + check_time(trials)
@@ -18,5 +21,35 @@ def run(r) -> None:
         storage_context(t)
     r.trials, r.findings = trials, findings
     r.experiment = experiment_for(trials)
+    check_plant_options(r)
+    if r.experiment.scale_free:
+        trials, r.units, found = normalise_units(trials, sources.get)
+        findings += found
+        r.trials, r.findings = trials, findings
     r.effects = r.experiment.applicable_effects(r.config.effects)
     r.skipped_effects = tuple(e for e in r.config.effects if e not in r.effects)
+
+
+def check_plant_options(r) -> None:
+    """Refuse a plant FMU or an RK4 step for an experiment that simulates no plant (the
+    position servo's limb model, the rendered impedance): silently ignoring them would
+    let a user believe their plant was used.
+
+    Raises
+    ------
+    DiagnosisInputError
+        Naming the option, the trials and the model the experiment re-simulates.
+    """
+    if r.experiment.uses_plant:
+        return
+    names = ", ".join(t.name for t in r.trials[:3]) + (" ..." if len(r.trials) > 3 else "")
+    what = {"position": "the limb model of diagnosis.limb driven by the measured angle "
+                        "(or the servo reference)",
+            "rendered": "the rendered impedance M_rd, B_rd, K_rd"}.get(
+        r.experiment.kind, f"its own model ({type(r.experiment).__name__})")
+    for option, value in (("--fmu", r.plant), ("--rk4-step", r.rk4_step)):
+        if value is not None:
+            shown = getattr(value, "path", value)
+            raise DiagnosisInputError(
+                f"{option} {shown}: trials {names} are {r.experiment.kind} experiments, "
+                f"re-simulated by {what}, not by a plant FMU; leave {option} out")

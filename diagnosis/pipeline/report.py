@@ -8,8 +8,11 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from trialformat import logs as tf
 
+from .. import catalogue as cat
 from ..errors import DiagnosisInputError
 from ..report import DiagnosisReport, write_report
 from .resume import CACHE_DIR
@@ -26,6 +29,18 @@ def build(r) -> DiagnosisReport:
     if chosen is not None and chosen.model is not None:
         model["with_named_effect"] = chosen.model.to_dict()
     from .how_far import reduction
+    fitted = {} if chosen is None else chosen.params
+    intervals = {} if chosen is None or not chosen.intervals else chosen.intervals
+    ranking, pair_rows = r.ranking, r.pair_rows
+    if r.units:
+        # the trials were rescaled (conventions.normalise_units): values back in the
+        # file's units (impedances, gains and masses scale with tau_h / theta)
+        rho = r.units["tau_h"] / r.units["theta"]
+        model = _impedance_dict(model, rho)
+        fitted = _effects_in_units(fitted, rho)
+        intervals = _effects_in_units(intervals, rho)
+        ranking = [_row_in_units(row, rho) for row in ranking]
+        pair_rows = [_row_in_units(row, rho) for row in pair_rows]
     return DiagnosisReport(
         verdict=r.verdict, named=r.named, summary=r.summary, amplitude=r.amplitude,
         conventions=[f.to_dict() for f in r.findings], numerics=r.numerics,
@@ -33,18 +48,8 @@ def build(r) -> DiagnosisReport:
                 "scheduler": None if r.scheduler is None else str(r.scheduler),
                 "phases": r.timings,
                 "resumed_tasks": 0 if r.resume is None else r.resume.n_reused},
-        fitted={} if chosen is None else chosen.params,
-        intervals={} if chosen is None or not chosen.intervals else chosen.intervals,
-        ranking=r.ranking, pairs=r.pair_rows,
-        gap={"nominal_all": r.nominal_all.value, "nominal_calibration": r.g0_cal,
-             "nominal_held_out": r.g0_held,
-             "significance_threshold": r.config.significance_gap,
-             "significant": bool(r.significant),
-             "named_held_out": None if chosen is None else chosen.held_out_gap,
-             "named_held_out_reduction": None if chosen is None else
-             reduction(r.g0_held, chosen.held_out_gap),
-             "named_all": None if r.after is None else r.after.value,
-             **({"fit_measure": r.fit_measure} if r.fit_measure else {})},
+        fitted=fitted, intervals=intervals, ranking=ranking, pairs=pair_rows,
+        gap=gap_block(r, chosen, reduction),
         where=r.where, arm=model,
         split={"rule": r.rule,
                "calibration": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
@@ -59,6 +64,76 @@ def build(r) -> DiagnosisReport:
         extras={"nominal_all": r.nominal_all, "after_all": r.after, "ev_all": r.ev_all,
                 "ev_named": r.ev_named,
                 "chosen": chosen, "trials": r.trials, "experiment": r.experiment})
+
+
+FEATURE_MEASURE = ("features: mean squared normalised difference of the FRF, noise, static "
+                   "and grid features above what noise gives (diagnosis.gap)")
+
+
+def gap_block(r, chosen, reduction) -> dict:
+    """The report's ``gap``: every top-level number in ONE measure, the one the which /
+    how-far / verdict stages rank and name by (``measure``); for an experiment with its
+    own fit measure (the position servo's limbfit), the where stage's feature gap is
+    given apart under ``features``, never mixed with it."""
+    features = {"measure": FEATURE_MEASURE, "nominal_all": r.nominal_all.value,
+                "significance_threshold": r.config.significance_gap,
+                "significant": bool(r.nominal_all.value > r.config.significance_gap),
+                "named_all": None if r.after is None else r.after.value}
+    fm = r.fit_measure
+    top = {"measure": FEATURE_MEASURE if not fm else fm["measure"],
+           "nominal_all": r.nominal_all.value if not fm else fm["g0_all"],
+           "nominal_calibration": r.g0_cal, "nominal_held_out": r.g0_held,
+           "significance_threshold": r.config.significance_gap if not fm else fm["threshold"],
+           "significant": bool(r.significant),
+           "named_calibration": None if chosen is None else chosen.calibration_gap,
+           "named_held_out": None if chosen is None else chosen.held_out_gap,
+           "named_held_out_reduction": None if chosen is None else
+           reduction(r.g0_held, chosen.held_out_gap),
+           # the named model on all data: in the feature measure only (limbfit gives the
+           # calibration and held-out parts)
+           "named_all": (None if r.after is None else r.after.value) if not fm else None}
+    if fm:
+        top["features"] = features
+        top["fit_measure"] = fm
+    return top
+
+
+#: units of the values that scale with tau_h / theta when the trials were rescaled
+IMPEDANCE_UNITS = ("N m/rad", "N m s/rad", "kg m^2", "N m s^2/rad")
+
+
+def _impedance_dict(model: dict, rho: float) -> dict:
+    out = dict(model)
+    for k in ("K_h", "B_h", "M_h"):
+        if k in out:
+            out[k] = (np.asarray(out[k], float) * rho).tolist()
+    if out.get("ci95"):
+        out["ci95"] = {k: (np.asarray(v, float) * rho).tolist() for k, v in out["ci95"].items()}
+    for k in ("with_named_effect", "behind_named_compliance"):
+        if isinstance(out.get(k), dict):
+            out[k] = _impedance_dict(out[k], rho)
+    return out
+
+
+def _effects_in_units(effects: dict, rho: float) -> dict:
+    """{effect: {param: value or [low, high]}} with impedance-like parameters (catalogue
+    units in IMPEDANCE_UNITS) times rho."""
+    out = {}
+    for name, params in (effects or {}).items():
+        units = {p.name: p.unit for p in cat.get_effect(name).parameters} \
+            if name in cat.CATALOGUE else {}
+        out[name] = {k: ((np.asarray(v, float) * rho).tolist() if isinstance(v, (list, tuple))
+                         else v * rho) if units.get(k) in IMPEDANCE_UNITS else v
+                     for k, v in (params or {}).items()}
+    return out
+
+
+def _row_in_units(row: dict, rho: float) -> dict:
+    row = dict(row)
+    row["params"] = _effects_in_units(row.get("params") or {}, rho)
+    if row.get("intervals"):
+        row["intervals"] = _effects_in_units(row["intervals"], rho)
+    return row
 
 
 def run(r) -> None:

@@ -25,7 +25,7 @@ import trialformat as tf
 from ..fitting import EffectFit
 
 #: bump when the meaning of a stored result changes
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 CACHE_DIR = ".diagnosis-cache"
 _MISSING = object()
 
@@ -96,6 +96,31 @@ class ResumeStore:
             for i, value in zip(todo, new):
                 results[i] = value
         return results
+
+    # ------------------------------------------------------------------ JSON results
+    def _json_path(self, key) -> Path:
+        text = json.dumps(list(key) if isinstance(key, tuple) else key, sort_keys=True)
+        return self.folder / f"r-{hashlib.sha256(text.encode()).hexdigest()[:32]}.json"
+
+    def get_json(self, key):
+        """The JSON result stored under ``key`` (a string or tuple of strings), or None
+        (none stored, or unreadable: a disk that filled up)."""
+        path = self._json_path(key)
+        try:
+            return json.loads(path.read_text()) if path.is_file() else None
+        except (OSError, ValueError):
+            return None
+
+    def put_json(self, key, value) -> None:
+        """Store ``value`` (JSON-able) under ``key``, atomically; a full disk only loses
+        the resumability."""
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            text = json.dumps(value, default=_json_default)
+            tf.atomic_write(self._json_path(key), lambda fh: fh.write(text.encode()))
+            self.n_stored += 1
+        except OSError:
+            pass
 
     # ------------------------------------------------------------------ files
     def _save(self, key, value) -> None:

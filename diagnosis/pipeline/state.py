@@ -36,6 +36,7 @@ class DiagnosisRun:
     experiment: object = None
     effects: tuple = ()
     skipped_effects: tuple = ()
+    units: dict | None = None      # {signal: divisor} the trials were rescaled by, or None
     # estimate
     model: object = None
     # nominal

@@ -16,7 +16,9 @@ from .where import amplitude_dependence, rest_where, where_breakdown
 def run(r) -> None:
     """Fill ``r.verdict``, ``r.named``, ``r.chosen``, ``r.after``, ``r.amplitude``,
     ``r.summary``, ``r.timings``."""
-    verdict, named, chosen = choose(r.significant, r.singles, r.pairs, r.g0_held, r.config)
+    verdict, named, chosen = choose(r.significant, r.singles, r.pairs, r.g0_held, r.config,
+                                    best_only=getattr(r.experiment, "name_best_fit_only",
+                                                      False))
     after = None
     if chosen is not None and chosen.model is not None:
         # the fit re-estimated the limb with the effect: the named model is that limb
@@ -59,16 +61,25 @@ def run(r) -> None:
     r.amplitude, r.summary = amplitude, summary
 
 
-def choose(significant, singles, pairs, g0_held, cfg):
+def choose(significant, singles, pairs, g0_held, cfg, *, best_only: bool = False):
     """(verdict, named effects, chosen fit) from the ranked fits.
 
     Only fits with no parameter on a search bound are candidates. The best such single is
     replaced by a pair only when the pair's second effect earns its place on both the
     calibration gap and the held-out gap (:func:`pair_earns_second`).
+
+    ``best_only`` (experiments whose fits re-estimate the limb with every effect, the
+    position servo: ``Experiment.name_best_fit_only``): only the best-ranked single can
+    be named; when it is flagged (a bound, a negative gain) the verdict is "unexplained"
+    rather than the runner-up's name: a model that fits the calibration data better
+    than the runner-up but only with a non-physical value says the runner-up is not the
+    explanation either (a 35 ms channel delay the search missed was otherwise named
+    ``wobbling_mass`` behind a negative-gain reflex). limbfit.diagnose_position, which
+    the position validation scores, applies the same rule.
     """
     if not significant:
         return VERDICT_NONE, [], None
-    best = next((f for f in singles if f.nameable), None)
+    best = next((f for f in singles[:1 if best_only else len(singles)] if f.nameable), None)
     if best is None:
         return VERDICT_UNEXPLAINED, [], None
     chosen = next((p for p in pairs if p.nameable and p.effects[0] == best.effects[0]
