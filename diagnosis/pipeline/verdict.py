@@ -4,6 +4,8 @@ residual depends on the amplitude; the one-sentence summary."""
 
 from __future__ import annotations
 
+import math
+
 from .. import catalogue as cat
 from ..config import (VERDICT_CONVENTION, VERDICT_EFFECT, VERDICT_NONE, VERDICT_PARTLY,
                       VERDICT_UNEXPLAINED, DiagnosisConfig)
@@ -43,7 +45,8 @@ def run(r) -> None:
     amplitude = amplitude_dependence(residual, r.trials)
     if amplitude["amplitude_dependent"] and verdict == VERDICT_EFFECT:
         verdict = VERDICT_PARTLY  # no linear catalogue effect explains that
-    summary = verdict_text(verdict, named, chosen, r.g0_held, residual, amplitude)
+    summary = verdict_text(verdict, named, chosen, r.g0_held, residual, amplitude,
+                           best=r.singles[0] if r.singles else None)
     if r.numerics:
         summary += (" Numerical: the plant's RK4 step failed on "
                     + ", ".join(f"{n['trial']} at {n['failed_rk4_step']:.3g} s"
@@ -92,22 +95,38 @@ def choose(significant, singles, pairs, g0_held, cfg, *, best_only: bool = False
     return VERDICT_UNEXPLAINED, [], None
 
 
-def verdict_text(verdict, named, chosen, g0_held, residual, amplitude) -> str:
-    """One sentence: the verdict, what the named effect closes, where the rest lies."""
+def verdict_text(verdict, named, chosen, g0_held, residual, amplitude, best=None) -> str:
+    """One sentence: the verdict, what the named effect closes, where the rest lies; for
+    "unexplained", why the best-ranked fit ``best`` (an EffectFit) was not named."""
     amp = (" The residual is amplitude-dependent (its FRF part differs between "
            "perturbation levels): no linear catalogue effect explains that."
            if amplitude["amplitude_dependent"] else "")
     if verdict == VERDICT_NONE:
         return "no significant gap: the nominal model reproduces the trials within noise."
     if chosen is None:
-        return ("unexplained: no catalogue effect closes half of the held-out gap; the gap "
-                "lies in " + "; ".join(rest_where(residual)) + "." + amp)
+        return ("unexplained: " + _not_named(best, g0_held) + "; the gap lies in "
+                + "; ".join(rest_where(residual)) + "." + amp)
     share = 100 * reduction(g0_held, chosen.held_out_gap)
     text = f"{' + '.join(named)} closes {share:.0f} % of the held-out gap"
     if verdict == VERDICT_PARTLY:
         return ("partly explained: " + text + "; the rest lies in "
                 + "; ".join(rest_where(residual)) + "." + amp)
     return f"{verdict}: {text}." + amp
+
+
+def _not_named(best, g0_held) -> str:
+    """Why the best-ranked fit is not the explanation: a parameter on a search bound (or
+    a non-physical value), or too small a share of the held-out gap."""
+    if best is None or not best.effects:
+        return "no catalogue effect could be fitted"
+    share = reduction(g0_held, best.held_out_gap)
+    what = " + ".join(best.effects) + (f" ({100 * share:.0f} % of the held-out gap)"
+                                       if math.isfinite(share) else "")
+    flags = best.at_search_bound
+    if flags:
+        return (f"the best fit, {what}, has {'; '.join(flags)}: a fit at a search bound "
+                f"(or with a non-physical value) absorbs model error, so it is not named")
+    return f"no catalogue effect closes half of the held-out gap (the best: {what})"
 
 
 def pair_earns_second(pair: EffectFit, single: EffectFit, cfg: DiagnosisConfig) -> bool:
