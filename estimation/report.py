@@ -448,14 +448,19 @@ CORNER_MARKERS = ("o", "s", "^", "D")
 
 def marker_indices(f, slot, n_slots, n_marks=9) -> np.ndarray:
     """Indices of ``f`` (increasing, > 0) at which to draw the markers of curve ``slot``
-    of ``n_slots``: ``n_marks`` points evenly spaced on a log axis, each curve's shifted by
-    ``1 / n_slots`` of the spacing, so that the markers of overlapping curves interleave
-    instead of covering each other."""
+    of ``n_slots``: about ``n_marks`` points evenly spaced on a log axis, each curve's
+    shifted by ``1 / n_slots`` of the spacing and taken among the bins ``slot``,
+    ``slot + n_slots``, ... only, so that the markers of overlapping curves interleave
+    and never share a bin."""
     f = np.asarray(f, dtype=float)
+    own = np.arange(slot % n_slots, len(f), n_slots)
+    if not len(own):
+        return own
     lo, hi = np.log(f[0]), np.log(f[-1])
     step = (hi - lo) / n_marks
-    targets = lo + step * (np.arange(n_marks) + (slot + 0.5) / n_slots)
-    return np.unique(np.clip(np.searchsorted(f, np.exp(targets)), 0, len(f) - 1))
+    targets = np.exp(lo + step * (np.arange(n_marks) + (slot + 0.5) / n_slots))
+    near = np.abs(f[own][None, :] - targets[:, None]).argmin(axis=1)
+    return np.unique(own[near])
 
 
 def fig2(curves, arm, variants, truth_label="Table I"):
