@@ -337,13 +337,14 @@ def bode(result):
                       bbox={"facecolor": "white", "edgecolor": "tab:red", "pad": 2})
         if n <= 2 or i == n - 1:
             ax_c.set_xlabel("frequency [Hz]")
-    ax_leg = axes[(n - 1, 0)][2]
     handles, labels = axes[(0, 0)][0].get_legend_handles_labels()
-    ax_leg.legend(handles, labels, fontsize=7, loc="upper left", ncol=3 if n == 1 else 4,
-                  bbox_to_anchor=(0.0, -0.32), frameon=False)
+    legend = fig.legend(handles, labels, fontsize=7, loc="lower center",
+                        ncol=3 if n == 1 else 4, frameon=False)
     fig.suptitle(_title(result), fontsize=10)
-    texts = [fig.text(0.5, 0.0, "\n".join(box), ha="center", va="bottom", fontsize=7.5,
-                      family="monospace")] if box else []
+    texts = [legend]
+    texts += [fig.text(0.5, 0.0, "\n".join(box), ha="center", va="bottom", fontsize=7.5,
+                       multialignment="left",
+                       family="monospace")] if box else []
     texts.append(fig.text(0.5, 0.0, _method_caption(result, nd), ha="center", va="bottom",
                           fontsize=7, color="0.3", wrap=True))
     _fit_layout(fig, texts, width, axes_h)
@@ -351,8 +352,8 @@ def bode(result):
 
 
 def _fit_layout(fig, texts, width, axes_h) -> None:
-    """Stack ``texts`` (figure texts, top to bottom) under the axes and size the figure so
-    that axes, title and texts fill it without gaps."""
+    """Stack ``texts`` (a figure legend and figure texts, top to bottom) under the axes and
+    size the figure so that axes, title and texts fill it without gaps."""
     renderer = fig.canvas.get_renderer()
     dpi = fig.dpi
     pad = 0.08
@@ -363,7 +364,10 @@ def _fit_layout(fig, texts, width, axes_h) -> None:
     fig.set_size_inches(width, height)
     y = pad
     for t, h in reversed(list(zip(texts, heights))):
-        t.set_position((0.5, y / height))
+        if hasattr(t, "set_bbox_to_anchor"):  # a figure legend
+            t.set_bbox_to_anchor((0.5, y / height), transform=fig.transFigure)
+        else:
+            t.set_position((0.5, y / height))
         y += h + pad
     fig._suptitle.set_position((0.5, 1 - pad / height))
     fig._suptitle.set_va("top")
@@ -466,16 +470,18 @@ def _parameter_caption(result) -> list[str]:
                 parts.append(f"{symbol(p, 1)} {_same_place(lo, ci)} ... "
                              f"{_same_place(hi, ci)}")
             lines.append(f"over {nv} band/weighting choices: " + ", ".join(parts))
-    else:
+    else:  # one line per matrix row, the cells aligned
+        nv = len(result.sensitivity["variants"]) if rng else 0
         for p in "KBM":
             value, ci = getattr(result.fit, p), getattr(result.fit, f"{p}_ci")
-            text = (f"{p} = [" + "; ".join(", ".join(plus_minus(value[i, k], ci[i, k])
-                                                     for k in range(n)) for i in range(n))
-                    + f"] {UNITS_PRETTY[p]}")
+            cells = [[plus_minus(value[i, k], ci[i, k]) for k in range(n)] for i in range(n)]
+            w = max(len(c) for row in cells for c in row)
+            lines.append(f"{p} [{UNITS_PRETTY[p]}]:")
+            lines += ["  [ " + "   ".join(c.rjust(w) for c in row) + " ]" for row in cells]
             if rng:
                 lo, hi = (np.asarray(x) for x in rng[p])
-                text += f"  (range {_matrix_text(lo)} ... {_matrix_text(hi)})"
-            lines.append(text)
+                lines.append(f"  over {nv} band/weighting choices: {_matrix_text(lo)} ... "
+                             f"{_matrix_text(hi)}")
     if result.reflex and lines:
         lines.insert(0, "second-order fit:")
     return lines + _reflex_caption(result)
