@@ -966,14 +966,15 @@ def fit_warnings(result: LabResult, options: AnalysisOptions) -> list[str]:
     """Warnings a lab needs before using the numbers (docs/estimation.md)."""
     out = []
     fit, n = result.fit, result.n_dof
-    for p in "MBK":
+    for p in "KBM":
         value, ci = getattr(fit, p), getattr(fit, f"{p}_ci")
         for i in range(n):
+            sym = symbol_of(p, n)  # one joint: I, as in the printed line
             if value[i, i] < 0:
-                out.append(f"non-physical fit: {p}{_e(i, i, n)} = {value[i, i]:.4g} "
+                out.append(f"non-physical fit: {sym}{_e(i, i, n)} = {value[i, i]:.4g} "
                            f"{UNITS[p]} is negative ({NAMES[p]})")
             elif abs(ci[i, i]) > options.ci_max_rel * abs(value[i, i]):
-                out.append(f"{p}{_e(i, i, n)} poorly determined: {value[i, i]:.4g} +- "
+                out.append(f"{sym}{_e(i, i, n)} poorly determined: {value[i, i]:.4g} +- "
                            f"{ci[i, i]:.2g} {UNITS[p]}"
                            + (" (does the band reach where the inertia shows? set --band)"
                               if p == "M" else ""))

@@ -39,6 +39,7 @@ from trialformat.tempdirs import disown_temp_dir, own_temp_dir  # noqa: E402
 
 from .lab import (COHERENT, FRF_UNITS, MIN_RUN_BINS, UNITS, WEIGHTING_TEXT,  # noqa: E402
                   effective_averages, element_indices, frf_confidence, result_rows, runs)
+from .numbers import at_decimals, decimals_of, plus_minus  # noqa: E402
 
 
 def safe_name(label: str) -> str:
@@ -113,7 +114,7 @@ def write_parameters(results, folder: Path) -> list[Path]:
         md.append(reflex_markdown(results))
         md += [f"- {r.label}: reflex fit not done for {s['trial']}: {s['reason']}"
                for r in results for s in r.reflex_not_fitted if s["kind"] == "joints"]
-    cols = list(dict.fromkeys(c for row in rows for c in row))
+    cols = kbi_columns(list(dict.fromkeys(c for row in rows for c in row)))
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n", restval="")
     writer.writeheader()
@@ -122,37 +123,74 @@ def write_parameters(results, folder: Path) -> list[Path]:
             _text(folder / "parameters.md", "\n".join(md))]
 
 
+#: Order of the fitted parameters in every table and figure of the lab report.
+PARAMETER_ORDER = "KBM"
+
+
+def _parameter_of(column: str):
+    """``"K"``, ``"B"`` or ``"M"`` for a column of that parameter (its value, ``_ci``,
+    ``_range_min``/``_range_max`` or ``err_`` column), else None."""
+    name = column.split(" [", 1)[0].removeprefix("err_")
+    for suffix in ("_ci", "_range_min", "_range_max"):
+        name = name.removesuffix(suffix)
+    return name if name in PARAMETER_ORDER else None
+
+
+def kbi_columns(cols: list) -> list:
+    """``cols`` with the K, B, M (I) columns grouped in that order at the place of the
+    first of them (value, interval, range, error each kept in their order); the others
+    where they were."""
+    params = [c for c in cols if _parameter_of(c)]
+    if not params:
+        return list(cols)
+    at = cols.index(params[0])
+    ordered = sorted(params, key=lambda c: (PARAMETER_ORDER.index(_parameter_of(c)),
+                                            c.startswith("err_"), params.index(c)))
+    rest = [c for c in cols if not _parameter_of(c)]
+    return rest[:at] + ordered + rest[at:]
+
+
 def parameters_markdown(results) -> str:
-    """M, B, K +- CI per element and result, with R^2, VAF, coherence and warnings."""
+    """K, B, M (I for one joint) ± CI per element and result, rounded to the interval
+    (:func:`estimation.numbers.plus_minus`), with R^2, VAF, coherence and warnings."""
     lines = []
     for r in results:
+        nd = effective_averages(r.n_segments, r.welch)
         lines.append(f"### {r.label} ({r.method}, {', '.join(r.trials)})\n")
         lines.append(f"band {r.band_hz[0]:.4g}-{r.band_hz[1]:.4g} Hz ({r.band_source}), "
                      f"{r.n_segments} segments of {r.welch['nperseg']}, corrections: "
                      f"sampling {'on' if r.corrections['left_limit_sampling'] else 'off'}, "
                      f"leakage {'on' if r.corrections['window_leakage'] else 'off'}; fit: "
-                     f"{WEIGHTING_TEXT[r.weighting]} ({r.weighting})\n")
-        head = (["element"] + [f"{symbol(p, r.n_dof)} [{UNITS[p]}]" for p in "MBK"]
+                     f"{WEIGHTING_TEXT[r.weighting]} ({r.weighting}); confidence band of the "
+                     f"FRF in the Bode plot: from the coherence and {nd:.1f} equivalent "
+                     f"Welch averages (Bendat & Piersol eqs. 9.52-9.53); phase unwrapped "
+                     f"per stretch of coherence >= {PHASE_MIN_COHERENCE:g}\n")
+        head = (["element"] + [f"{symbol(p, r.n_dof)} [{UNITS[p]}]" for p in PARAMETER_ORDER]
                 + ["R^2", "VAF [%]", "coherence"])
         lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         conf = int(round(100 * r.fit.confidence))
         for i, k in element_indices(r.n_dof):
             cells = [f"Z{i + 1}{k + 1}" if r.n_dof > 1 else "Z"]
-            for p in "MBK":
-                cells.append(f"{getattr(r.fit, p)[i, k]:.5g} ± "
-                             f"{getattr(r.fit, f'{p}_ci')[i, k]:.2g}")
+            for p in PARAMETER_ORDER:
+                cells.append(plus_minus(getattr(r.fit, p)[i, k],
+                                        getattr(r.fit, f"{p}_ci")[i, k]))
             cells += [f"{r.fit.r2[i, k]:.4f}", f"{r.vaf[i, k]:.2f}",
                       f"{r.coherence_band[i, k]:.3f}"]
             lines.append("| " + " | ".join(cells) + " |")
         if r.sensitivity:
             nv = len(r.sensitivity["variants"])
+            rng = r.sensitivity["range"]
             for i, k in element_indices(r.n_dof):
-                rng = r.sensitivity["range"]
                 lines.append(f"| range over {nv} band/weighting choices "
                              + ("" if r.n_dof == 1 else f"Z{i + 1}{k + 1} ") + "| "
-                             + " | ".join(f"{rng[p][0][i][k]:.5g} ... {rng[p][1][i][k]:.5g}"
-                                          for p in "MBK") + " | | | |")
-        lines.append(f"\n± : {conf} % confidence interval half-widths. "
+                             + " | ".join(
+                                 f"{_same_place(rng[p][0][i][k], getattr(r.fit, f'{p}_ci')[i, k])}"
+                                 f" ... "
+                                 f"{_same_place(rng[p][1][i][k], getattr(r.fit, f'{p}_ci')[i, k])}"
+                                 for p in PARAMETER_ORDER) + " | | | |")
+        lines.append(f"\n± : {conf} % confidence interval half-widths (2 significant "
+                     f"digits, the value to the same decimal place; parameters.csv and "
+                     f"results.json keep every digit). "
                      + ("1 joint: I is the inertia (column M in parameters.csv and "
                         "results.json).\n" if r.n_dof == 1 else "\n"))
         lines += [f"- warning: {w}" for w in r.warnings] + [""]
@@ -191,37 +229,70 @@ def stretch_phase_deg(z, coherence, reference_deg=None, threshold=PHASE_MIN_COHE
     return out
 
 
+#: The Bode plot's frequency axis ends at the coherent range's top, but at most this factor
+#: above the fit band's top (the FRF table keeps the whole coherent range).
+PLOT_BEYOND_BAND = 2.0
+
+#: Plain words for each estimator (the figure's caption; docs/estimation.md has the rest).
+METHOD_TEXT = {"direct": "angle to torque (no recorded reference)",
+               "full": "through the recorded perturbation",
+               "decomposition": "through the recorded perturbation (T/R)",
+               "closed_loop": "through the perturbations of all joints"}
+
+
+def plot_top_hz(result) -> float:
+    """Top of a Bode plot's frequency axis [Hz]: the coherent range's top
+    (:attr:`LabResult.f_max`), at most :data:`PLOT_BEYOND_BAND` times the fit band's top."""
+    return min(result.f_max, PLOT_BEYOND_BAND * result.band_hz[1])
+
+
+def low_coherence_spans(f, coherence, threshold=PHASE_MIN_COHERENCE) -> list[tuple]:
+    """(lo, hi) [Hz] of the runs of bins whose coherence is below ``threshold``, each bin
+    widened by half a bin on either side (``f``: the uniform Welch grid, (nf,))."""
+    df = float(f[1] - f[0]) if len(f) > 1 else 0.0
+    return [(max(f[a] - df / 2, f[0]), min(f[b - 1] + df / 2, f[-1]))
+            for a, b in runs(np.asarray(coherence) < threshold)]
+
+
 def bode(result):
     """Magnitude, phase and coherence of every element; estimate, fitted model and band.
 
-    Drawn over the whole coherent range (:attr:`LabResult.f_max`). The estimate's phase is
-    unwrapped per coherent stretch (:func:`stretch_phase_deg`); a shaded confidence band
-    on magnitude and phase from the coherence and the equivalent number of Welch averages
-    (Bendat & Piersol eqs. 9.52-9.53, :func:`estimation.lab.frf_confidence`) where the
-    coherence is at least :data:`PHASE_MIN_COHERENCE`; the flags (non-physical or poor
-    fit, reversed torque sign, band-sensitive or time-varying parameters) in red in each
-    element's magnitude panel; the fitted K, B, M (I for one joint) in a caption below.
+    Frequency axis: from the first bin to :func:`plot_top_hz` (the coherent range, not far
+    past the fit band). The estimate's phase is unwrapped per coherent stretch
+    (:func:`stretch_phase_deg`); a shaded confidence band on magnitude and phase from the
+    coherence and the equivalent number of Welch averages (Bendat & Piersol eqs.
+    9.52-9.53, :func:`estimation.lab.frf_confidence`) where the coherence is at least
+    :data:`PHASE_MIN_COHERENCE`; the fit band shaded grey, and the bins whose coherence is
+    below :data:`PHASE_MIN_COHERENCE` hatched in every panel (inside the fit band they are
+    fitted, with their weight) and drawn grey. Title: the label and, for one joint, K, B, I
+    with their intervals (:func:`estimation.numbers.plus_minus`); the flags (non-physical
+    or poor fit, reversed torque sign, band-sensitive or time-varying parameters) in red
+    above each diagonal element's magnitude panel, outside the data; below, a box with the
+    parameters (n joints: the K, B, M matrices; ranges over bands and weightings; the
+    parallel-cascade fit) and a one-line caption of the method.
     """
     from .report import element_axes, unwrapped_phase_deg
 
     n = result.n_dof
-    f_max = result.f_max
-    sel = (result.f > 0) & (result.f <= f_max)
+    top = plot_top_hz(result)
+    sel = (result.f > 0) & (result.f <= top)
     f = result.f[sel]
-    caption = _parameter_caption(result)
-    width = max(4.2 * n * n + 1, 6.5) if n <= 2 else 4.4 * n
-    if n == 1 and result.reflex:  # room for the parallel-cascade caption
+    box = _parameter_caption(result)
+    width = max(4.2 * n * n + 1, 7.0) if n <= 2 else 4.4 * n
+    if n == 1 and result.reflex:  # room for the parallel-cascade lines
         width = 8.5
-    height = (6.6 if n <= 2 else 6.6 * n) + 0.9 + 0.22 * len(caption)
-    fig = plt.figure(figsize=(width, height))
+    axes_h = 6.0 if n <= 2 else 6.0 * n
+    fig = plt.figure(figsize=(width, axes_h + 2.0))
     axes = element_axes(fig, n, ("mag", "phase", "coherence"))
     nd = effective_averages(result.n_segments, result.welch)
     conf = int(round(100 * result.fit.confidence))
     flags = sorted(set(result.flags))
+    thr = PHASE_MIN_COHERENCE
+    band = (max(result.band_hz[0], f[0]), result.band_hz[1])
     for (i, k), (ax_m, ax_p, ax_c) in axes.items():
         z, m, c = result.Z[sel, i, k], result.model[sel, i, k], result.coherence[sel, i, k]
         e = f"Z{i + 1}{k + 1}" if n > 1 else "Z"
-        coherent = c >= PHASE_MIN_COHERENCE
+        coherent = c >= thr
         rel = np.where(coherent, frf_confidence(c, nd, result.fit.confidence), np.nan)
         model_phase = unwrapped_phase_deg(m)
         phase = stretch_phase_deg(z, c, model_phase)
@@ -229,9 +300,9 @@ def bode(result):
                           color="tab:blue", alpha=0.25, lw=0, label=f"{conf} % band")
         ax_m.loglog(f, np.where(coherent, np.abs(z), np.nan), color="tab:blue", lw=1.0,
                     label="estimate")
-        ax_m.loglog(f, np.where(coherent, np.nan, np.abs(z)), color="0.6", lw=0.6,
-                    label=f"estimate, coherence < {PHASE_MIN_COHERENCE:g}")
-        ax_m.loglog(f, np.abs(m), "k--", lw=1.2, label="fitted model")
+        ax_m.loglog(f, np.where(coherent, np.nan, np.abs(z)), color="0.55", lw=0.7,
+                    label=f"estimate, coherence < {thr:g}")
+        ax_m.loglog(f, np.abs(m), "k--", lw=1.2, label="fitted model (second order)")
         ax_p.fill_between(f, phase - np.degrees(rel), phase + np.degrees(rel),
                           color="tab:blue", alpha=0.25, lw=0)
         ax_p.semilogx(f, phase, color="tab:blue", lw=1.0)
@@ -239,33 +310,94 @@ def bode(result):
         if n == 1:
             _draw_reflex(ax_m, ax_p, f, result.reflex or [], model_phase)
         ax_c.semilogx(f, c, color="tab:green", lw=1.0)
-        ax_c.axhline(PHASE_MIN_COHERENCE, color="0.5", lw=0.6, ls=":")
+        ax_c.semilogx(f, np.where(coherent, np.nan, c), color="tab:red", lw=0, marker=".",
+                      ms=3)
+        ax_c.axhline(thr, color="0.3", lw=0.7, ls=":")
+        ax_c.text(1.0, thr, f" {thr:g}", transform=ax_c.get_yaxis_transform(),
+                  fontsize=7, va="center", ha="left", color="0.3")
         ax_c.set_ylim(0, 1.05)
-        ax_m.set_title(e, fontsize=10)
+        if n > 1:
+            ax_m.set_title(e, fontsize=10, loc="right")
         ax_m.set_ylabel(f"|{e}| [N m/rad]")
         ax_p.set_ylabel("phase [deg]")
         ax_c.set_ylabel("coherence [-]")
-        for ax in (ax_m, ax_p, ax_c):
-            ax.axvspan(max(result.band_hz[0], f[0]), result.band_hz[1], color="0.9", zorder=0)
+        spans = low_coherence_spans(f, c, thr)
+        for j, ax in enumerate((ax_m, ax_p, ax_c)):
+            ax.axvspan(*band, color="0.88", zorder=0, lw=0,
+                       label="fit band" if j == 0 else None)
+            for s, (a, b) in enumerate(spans):
+                ax.axvspan(a, b, facecolor="white", edgecolor="0.6", hatch="////", lw=0,
+                           zorder=0.5, label=(f"coherence < {thr:g}" if j == s == 0
+                                              else None))
             ax.grid(True, which="both", alpha=0.3)
             ax.set_xlim(f[0], f[-1])
         if flags and (i == k or n == 1):
-            ax_m.text(0.02, 0.02, "FLAGGED: " + ", ".join(flags), transform=ax_m.transAxes,
-                      color="tab:red", fontsize=8, va="bottom", ha="left", wrap=True,
-                      bbox={"facecolor": "white", "edgecolor": "tab:red", "alpha": 0.85})
+            ax_m.text(0.0, 1.03, "FLAGGED: " + ", ".join(flags), transform=ax_m.transAxes,
+                      color="tab:red", fontsize=8, va="bottom", ha="left",
+                      bbox={"facecolor": "white", "edgecolor": "tab:red", "pad": 2})
         if n <= 2 or i == n - 1:
             ax_c.set_xlabel("frequency [Hz]")
-    axes[(0, 0)][0].legend(fontsize=7, loc="upper left")
-    fig.suptitle(f"{result.label}: {result.method}, fit band {result.band_hz[0]:.3g}-"
-                 f"{result.band_hz[1]:.3g} Hz (shaded), {result.weighting} weighting\n"
-                 f"phase unwrapped per stretch of coherence >= {PHASE_MIN_COHERENCE:g}\n"
-                 f"{conf} % band: coherence, {nd:.1f} equivalent averages (Bendat & "
-                 f"Piersol 9.52-9.53)", fontsize=9)
-    bottom = (0.25 + 0.22 * len(caption)) / height
-    fig.text(0.5, 0.15 / height, "\n".join(caption), ha="center", va="bottom", fontsize=8,
-             family="monospace")
-    fig.tight_layout(rect=(0, bottom, 1, 1 - 0.55 / height))
+    handles, labels = axes[(0, 0)][0].get_legend_handles_labels()
+    legend = fig.legend(handles, labels, fontsize=7, loc="lower center",
+                        ncol=3 if n == 1 else 4, frameon=False)
+    fig.suptitle(_title(result), fontsize=10)
+    texts = [legend]
+    texts += [fig.text(0.5, 0.0, "\n".join(box), ha="center", va="bottom", fontsize=7.5,
+                       multialignment="left",
+                       family="monospace")] if box else []
+    texts.append(fig.text(0.5, 0.0, _method_caption(result, nd), ha="center", va="bottom",
+                          fontsize=7, color="0.3", wrap=True))
+    _fit_layout(fig, texts, width, axes_h)
     return fig
+
+
+def _fit_layout(fig, texts, width, axes_h) -> None:
+    """Stack ``texts`` (a figure legend and figure texts, top to bottom) under the axes and
+    size the figure so that axes, title and texts fill it without gaps."""
+    renderer = fig.canvas.get_renderer()
+    dpi = fig.dpi
+    pad = 0.08
+    heights = [t.get_window_extent(renderer).height / dpi for t in texts]
+    title_h = fig._suptitle.get_window_extent(renderer).height / dpi + pad
+    bottom = sum(heights) + pad * (len(texts) + 1)
+    height = axes_h + title_h + bottom
+    fig.set_size_inches(width, height)
+    y = pad
+    for t, h in reversed(list(zip(texts, heights))):
+        if hasattr(t, "set_bbox_to_anchor"):  # a figure legend
+            t.set_bbox_to_anchor((0.5, y / height), transform=fig.transFigure)
+        else:
+            t.set_position((0.5, y / height))
+        y += h + pad
+    fig._suptitle.set_position((0.5, 1 - pad / height))
+    fig._suptitle.set_va("top")
+    fig.tight_layout(rect=(0, bottom / height, 1, 1 - title_h / height), pad=0.3,
+                     h_pad=0.6)
+
+
+def _title(result) -> str:
+    """``label: K = 79.5 ± 1.6 N m/rad, B = ..., I = ...`` (one joint), else the label."""
+    if result.n_dof > 1:
+        return f"{result.label} ({result.n_dof} joints): fitted K, B, M below"
+    parts = [f"{symbol(p, 1)} = " + plus_minus(getattr(result.fit, p)[0, 0],
+                                                getattr(result.fit, f"{p}_ci")[0, 0],
+                                                UNITS_PRETTY[p]) for p in "KBM"]
+    head = f"{result.label}, second-order fit" if result.reflex else result.label
+    return f"{head}: " + ", ".join(parts)
+
+
+#: Units as printed on figures.
+UNITS_PRETTY = {"K": "N m/rad", "B": "N m s/rad", "M": "kg m²"}
+
+
+def _method_caption(result, nd) -> str:
+    conf = int(round(100 * result.fit.confidence))
+    return (f"Estimate: {METHOD_TEXT.get(result.method, result.method)}, "
+            f"{', '.join(result.trials)}. Fit band {result.band_hz[0]:.3g}-"
+            f"{result.band_hz[1]:.3g} Hz (grey). Blue band: {conf} % confidence from the "
+            f"coherence ({nd:.0f} equivalent averages). Hatched: coherence < "
+            f"{PHASE_MIN_COHERENCE:g} (estimate grey, phase not drawn). Details: "
+            f"parameters.md.")
 
 
 #: line styles of the parallel-cascade model: intrinsic, reflex, total
@@ -296,15 +428,18 @@ def _draw_reflex(ax_m, ax_p, f, fits, reference_deg) -> None:
 
 
 def _reflex_caption(result) -> list[str]:
+    """The parallel-cascade fits, K, B, I first, each value rounded to its interval."""
+    from .reflex import delay_text
     lines = []
     for r in result.reflex or []:
         v, c = r.values, r.ci
         lines += [f"intrinsic + reflex, parallel cascade ({r.trial}, rectify {r.rectify}):",
-                  f"  K = {v['K']:.4g} +- {c['K']:.2g} N m/rad, B = {v['B']:.4g} +- "
-                  f"{c['B']:.2g} N m s/rad, I = {v['I']:.4g} +- {c['I']:.2g} kg m^2",
-                  f"  G = {v['G']:.4g} +- {c['G']:.2g} N m s/rad, delay {v['delay_ms']:.1f} "
-                  f"+- {c['delay_ms']:.2g} ms, low-pass {v['cutoff_hz']:.3g} +- "
-                  f"{c['cutoff_hz']:.2g} Hz, damping {v['damping']:.3g} +- {c['damping']:.2g}",
+                  f"  K = {plus_minus(v['K'], c['K'], 'N m/rad')}, B = "
+                  f"{plus_minus(v['B'], c['B'], 'N m s/rad')}, I = "
+                  f"{plus_minus(v['I'], c['I'], 'kg m²')}",
+                  f"  G = {plus_minus(v['G'], c['G'], 'N m s/rad')}, delay {delay_text(r)}, "
+                  f"low-pass {plus_minus(v['cutoff_hz'], c['cutoff_hz'], 'Hz')}, damping "
+                  f"{plus_minus(v['damping'], c['damping'])}",
                   f"  VAF intrinsic {r.vaf_pct['intrinsic']:.1f} %, reflex "
                   f"{r.vaf_pct['reflex']:.1f} %, total {r.vaf_pct['total']:.1f} % (K-B-I alone "
                   f"{r.vaf_pct['intrinsic_only']:.1f} %)",
@@ -318,19 +453,47 @@ def _reflex_caption(result) -> list[str]:
 
 
 def _parameter_caption(result) -> list[str]:
-    """One line per fitted parameter: ``K = [...] +- [...] N m/rad`` (I for one joint),
-    with the sensitivity range over bands and weightings when computed."""
+    """The box under a Bode plot, K, B, I (M) in that order. One joint: the range of K,
+    B, I over bands and weightings (the values themselves are in the title); n joints:
+    ``K = [a ± da, ...; ...] N m/rad`` per parameter, with its range. Then the
+    parallel-cascade fits (:func:`_reflex_caption`)."""
+    n = result.n_dof
     lines = []
-    for p in ("K", "B", "M"):
-        text = (f"{symbol(p, result.n_dof)} = " + _matrix_text(getattr(result.fit, p))
-                + " +- " + _matrix_text(getattr(result.fit, f"{p}_ci")) + f" {UNITS[p]}")
-        if result.sensitivity:
-            lo, hi = result.sensitivity["range"][p]
-            text += f"  (range {_matrix_text(lo)} ... {_matrix_text(hi)})"
-        lines.append(text)
-    if result.reflex:
-        lines.insert(0, "second-order fit (fitted model):")
+    rng = result.sensitivity["range"] if result.sensitivity else None
+    if n == 1:
+        if rng:
+            nv = len(result.sensitivity["variants"])
+            parts = []
+            for p in "KBM":
+                ci = float(getattr(result.fit, f"{p}_ci")[0, 0])
+                lo, hi = (float(np.asarray(x).ravel()[0]) for x in rng[p])
+                parts.append(f"{symbol(p, 1)} {_same_place(lo, ci)} ... "
+                             f"{_same_place(hi, ci)}")
+            lines.append(f"over {nv} band/weighting choices: " + ", ".join(parts))
+    else:  # one line per matrix row, the cells aligned
+        nv = len(result.sensitivity["variants"]) if rng else 0
+        for p in "KBM":
+            value, ci = getattr(result.fit, p), getattr(result.fit, f"{p}_ci")
+            cells = [[plus_minus(value[i, k], ci[i, k]) for k in range(n)] for i in range(n)]
+            w = max(len(c) for row in cells for c in row)
+            lines.append(f"{p} [{UNITS_PRETTY[p]}]:")
+            lines += ["  [ " + "   ".join(c.rjust(w) for c in row) + " ]" for row in cells]
+            if rng:
+                lo, hi = (np.asarray(x) for x in rng[p])
+                lines.append(f"  over {nv} band/weighting choices: {_matrix_text(lo)} ... "
+                             f"{_matrix_text(hi)}")
+    if result.reflex and lines:
+        lines.insert(0, "second-order fit:")
     return lines + _reflex_caption(result)
+
+
+def _same_place(x: float, ci: float) -> str:
+    """``x`` rounded to the decimal place of ``ci`` at 2 significant digits (4
+    significant digits when ``ci`` is not a positive number)."""
+    try:
+        return at_decimals(x, decimals_of(ci))
+    except ValueError:
+        return f"{x:.4g}"
 
 
 def _matrix_text(a) -> str:

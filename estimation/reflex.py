@@ -57,6 +57,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .errors import EstimationError
+from .numbers import plus_minus
 
 PARAMS = ("K", "B", "I", "G", "delay_ms", "cutoff_hz", "damping")
 UNITS = {"K": "N m/rad", "B": "N m s/rad", "I": "kg m^2", "G": "N m s/rad",
@@ -189,7 +190,7 @@ class ReflexResult:
                  f"B={v['B']:.4g}±{c['B']:.2g} {UNITS['B']}  "
                  f"I={v['I']:.4g}±{c['I']:.2g} {UNITS['I']}",
                  f"    reflex: G={v['G']:.4g}±{c['G']:.2g} {UNITS['G']}  "
-                 f"delay={v['delay_ms']:.1f}±{c['delay_ms']:.2g} ms  "
+                 f"delay={delay_text(self, compact=True)}  "
                  f"low-pass {v['cutoff_hz']:.3g}±{c['cutoff_hz']:.2g} Hz, "
                  f"damping {v['damping']:.3g}±{c['damping']:.2g}",
                  f"    VAF intrinsic {self.vaf_pct['intrinsic']:.1f} %, reflex "
@@ -534,6 +535,19 @@ def fit_reflex(theta, tau, fs, options: ReflexOptions | None = None, *, name="",
     return result
 
 
+def delay_text(r: ReflexResult, *, compact=False, unit=True) -> str:
+    """The fitted delay as printed: ``52.8 ± 2.7 ms``, or, at an end of its search range
+    (where the jackknife interval is 0 and means nothing), ``10.0 ms (at the search bound)``
+    without an interval. ``compact``: ``52.8±2.7 ms`` (the console's style)."""
+    d, ci = r.values["delay_ms"], r.ci["delay_ms"]
+    rng = (r.options or {}).get("delay_ms")
+    ms = " ms" if unit else ""
+    if rng is not None and any(np.isclose(d, b, rtol=1e-3) for b in rng):
+        return f"{d:.1f}{ms} (at the search bound)"
+    text = plus_minus(d, ci)
+    return (text.replace(" ± ", "±") if compact else text) + ms
+
+
 def reflex_warnings(r: ReflexResult, options: ReflexOptions) -> list:
     """What a lab must know before using the reflex numbers."""
     out = []
@@ -669,7 +683,8 @@ def reflex_markdown(results) -> str:
         for r in res.reflex or []:
             v, c = r.values, r.ci
             cells = [f"{r.trial} ({r.rectify})"] + [
-                f"{v[p]:.4g} ± {c[p]:.2g}" for p in PARAMS] + [
+                delay_text(r, unit=False) if p == "delay_ms" else plus_minus(v[p], c[p])
+                for p in PARAMS] + [
                 f"{r.vaf_pct['intrinsic']:.1f} / {r.vaf_pct['reflex']:.1f} / "
                 f"{r.vaf_pct['total']:.1f}",
                 f"{r.intrinsic_only['K']:.4g}, {r.vaf_pct['intrinsic_only']:.1f}"]

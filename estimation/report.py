@@ -441,42 +441,86 @@ def _fig2_title(corners, arm, truth_label, top):
     return f"Fig. 2: estimated impedance{truth}, {which} at perturbation level {top}"
 
 
+#: Marker of each corner condition (with its colour), so that overlapping curves stay
+#: apart in print and for colour-blind readers.
+CORNER_MARKERS = ("o", "s", "^", "D")
+
+
+def marker_indices(f, slot, n_slots, n_marks=9) -> np.ndarray:
+    """Indices of ``f`` (increasing, > 0) at which to draw the markers of curve ``slot``
+    of ``n_slots``: about ``n_marks`` points evenly spaced on a log axis, each curve's
+    shifted by ``1 / n_slots`` of the spacing and taken among the bins ``slot``,
+    ``slot + n_slots``, ... only, so that the markers of overlapping curves interleave
+    and never share a bin."""
+    f = np.asarray(f, dtype=float)
+    own = np.arange(slot % n_slots, len(f), n_slots)
+    if not len(own):
+        return own
+    lo, hi = np.log(f[0]), np.log(f[-1])
+    step = (hi - lo) / n_marks
+    targets = np.exp(lo + step * (np.arange(n_marks) + (slot + 0.5) / n_slots))
+    near = np.abs(f[own][None, :] - targets[:, None]).argmin(axis=1)
+    return np.unique(own[near])
+
+
 def fig2(curves, arm, variants, truth_label="Table I"):
     """Estimated vs true Z for the corner conditions at the highest perturbation level.
 
     ``curves``: ``{Condition: {variant: (f_band, Z_band)}}`` (see :func:`score_condition`).
-    Per element: magnitude, phase (unwrapped) and, with a truth, the relative error
-    ``|Zhat - Z| / |Z|`` [%], which separates the variants where the curves overlap;
-    elements laid out by :func:`element_axes`. Colour: corner condition (friction,
-    resolution) in {0, 3}^2; line style: variant (the first solid). ``truth_label`` names
-    the truth in the title and legend (Table I, the 3-joint reference).
+    Per element: magnitude and phase (unwrapped) of the truth (black, dotted) and of the
+    main variant's estimate of each condition (colour and marker: corner condition
+    (friction, resolution) in {0, 3}^2; markers interleaved, :func:`marker_indices`).
+    With a truth and 1-2 joints, below them one row per condition (small multiples) of
+    the relative error ``|Zhat - Z| / |Z|`` [%] of every variant (line style: variant,
+    the first solid), on one shared log axis, which separates what the Bode rows cannot;
+    for 3 joints (elements laid out by :func:`element_axes`) one error panel per element
+    with the conditions' markers. ``truth_label`` names the truth in the title and legend.
     """
     corners = sorted(curves.items(), key=lambda cc: (cc[0].friction, cc[0].resolution))
     top = corners[0][0].perturbation if corners else None
     n = next((Z.shape[1] for _, cv in corners for _, Z in cv.values()), 2)
-    quantities = ("mag", "phase", "err") if arm is not None else ("mag", "phase")
+    multiples = arm is not None and n <= 2 and len(corners) > 1
+    err_rows = len(corners) if multiples else (1 if arm is not None else 0)
+    quantities = ("mag", "phase") + ("err",) * err_rows
     q = len(quantities)
-    size = (4 * n * n, 3.2 * q + 1.2) if n <= 2 else (4.4 * n, 2.3 * q * n + 1.6)
-    fig = plt.figure(figsize=size)
-    axes = element_axes(fig, n, quantities)
+    if n <= 2:
+        ratios = [1.5, 1.5] + [1.0] * err_rows
+        fig = plt.figure(figsize=(4 * n * n, 1.9 * sum(ratios) + 1.4))
+        grid = fig.subplots(q, n * n, sharex=True, squeeze=False,
+                            gridspec_kw={"height_ratios": ratios})
+        axes = {(i, k): list(grid[:, i * n + k]) for i in range(n) for k in range(n)}
+    else:
+        fig = plt.figure(figsize=(4.4 * n, 2.3 * q * n + 1.6))
+        axes = element_axes(fig, n, quantities)
+    err_axes = [a for ax in axes.values() for a in ax[2:]]
+    for a in err_axes[1:]:
+        a.sharey(err_axes[0])
     f_band = None
     drawn = set()
-    for cond, by_variant in corners:
-        color = CORNER_COLORS[CORNERS.index((cond.friction, cond.resolution))]
+    main = variants[0]
+    for row, (cond, by_variant) in enumerate(corners):
+        slot = CORNERS.index((cond.friction, cond.resolution))
+        color, marker = CORNER_COLORS[slot], CORNER_MARKERS[slot]
         for style, name in zip(VARIANT_STYLES, variants):
             if name not in by_variant:
                 continue
             f_band, Z = by_variant[name]
             drawn.add((cond.friction, cond.resolution, name))
             Zt = true_impedance(f_band, *arm) if arm is not None else None
+            marks = {"marker": marker, "ms": 5, "mfc": "white", "mew": 1.2,
+                     "markevery": marker_indices(f_band, slot, len(CORNERS))}
             for (i, k), ax in axes.items():
                 z = Z[:, i, k]
-                ax[0].loglog(f_band, np.abs(z), style, color=color, lw=1.2)
-                ax[1].semilogx(f_band, unwrapped_phase_deg(z), style, color=color, lw=1.2)
+                if name == main:
+                    ax[0].loglog(f_band, np.abs(z), style, color=color, lw=1.0, **marks)
+                    ax[1].semilogx(f_band, unwrapped_phase_deg(z), style, color=color,
+                                   lw=1.0, **marks)
                 if Zt is not None:
                     zt = Zt[:, i, k]
-                    ax[2].loglog(f_band, 100 * np.abs(z - zt) / np.abs(zt), style,
-                                 color=color, lw=1.2)
+                    err = 100 * np.abs(z - zt) / np.abs(zt)
+                    target = ax[2 + row] if multiples else ax[2]
+                    target.loglog(f_band, err, style, color=color, lw=1.0,
+                                  **({} if multiples else marks))
     if arm is not None and f_band is not None:
         zt = true_impedance(f_band, *arm)
         for (i, k), ax in axes.items():
@@ -487,8 +531,12 @@ def fig2(curves, arm, variants, truth_label="Table I"):
         ax[0].set_title(e, fontsize=10)
         ax[0].set_ylabel(f"|{e}| [N m/rad]")
         ax[1].set_ylabel("phase [deg]")
-        if arm is not None:
-            ax[2].set_ylabel("error [%]")
+        for row, a in enumerate(ax[2:]):
+            if multiples:
+                c = corners[row][0]
+                a.set_ylabel(f"error [%]\nF{c.friction}R{c.resolution}", fontsize=9)
+            else:
+                a.set_ylabel("error [%]")
         if n <= 2 or i == n - 1:
             ax[-1].set_xlabel("frequency [Hz]")
         for a in ax:
@@ -497,22 +545,32 @@ def fig2(curves, arm, variants, truth_label="Table I"):
                           truth_label)
     fig.legend(handles=legend, loc="lower center", ncol=min(len(legend), 4 if n <= 2 else 3),
                fontsize=9, frameon=False)
-    fig.suptitle(_fig2_title(corners, arm, truth_label, top)
-                 + ("\nerror: |Zhat - Z| / |Z| [%]" if arm is not None else ""), fontsize=12)
-    bottom = (0.06 if n <= 2 else 0.05)
-    fig.tight_layout(rect=(0, bottom, 1, 1 - (0.0 if n <= 2 else 0.01)))
+    errs = ""
+    if arm is not None:
+        errs = ("\nrows 3-: error |Zhat - Z| / |Z| [%] of each condition (FfRr: friction "
+                "level f, resolution level r), one axis for all" if multiples
+                else "\nerror: |Zhat - Z| / |Z| [%]")
+    fig.suptitle(_fig2_title(corners, arm, truth_label, top) + errs, fontsize=12)
+    legend_h = 0.35 + 0.22 * np.ceil(len(legend) / (4 if n <= 2 else 3))
+    fig.tight_layout(rect=(0, legend_h / fig.get_size_inches()[1], 1, 1))
     return fig
 
 
 def _fig2_legend(corners, variants, arm, drawn, truth_label="Table I"):
     from matplotlib.lines import Line2D
 
-    handles = [Line2D([], [], color=CORNER_COLORS[CORNERS.index((c.friction, c.resolution))],
-                      label=_corner_label(c.friction, c.resolution)) for c, _ in corners]
+    handles = []
+    for c, _ in corners:
+        slot = CORNERS.index((c.friction, c.resolution))
+        handles.append(Line2D([], [], color=CORNER_COLORS[slot], marker=CORNER_MARKERS[slot],
+                              mfc="white", mew=1.2,
+                              label=f"F{c.friction}R{c.resolution}: "
+                                    + _corner_label(c.friction, c.resolution)))
     handles += [Line2D([], [], color="k", ls=style,
                        label=f"{name}: {VARIANT_LABELS.get(name, '')}"
+                       + (" (Bode rows)" if j == 0 and len(variants) > 1 else "")
                        + ("" if any(d[2] == name for d in drawn) else " (no trials)"))
-                for style, name in zip(VARIANT_STYLES, variants)]
+                for j, (style, name) in enumerate(zip(VARIANT_STYLES, variants))]
     if arm is not None:
         handles.append(Line2D([], [], **TRUTH_STYLE, label=f"true impedance: {truth_label or 'truth'}"))
     return handles
@@ -535,8 +593,20 @@ def _condition_axis(ax, part, bottom):
     return x
 
 
+#: The study's VAF target [%] (orchestrator.paper.TARGETS["vaf_min"]), drawn in Fig. 3.
+VAF_TARGET = 99.5
+#: Markers of the elements in Figs. 3 and 4 (up to 3 joints).
+ELEMENT_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "<", ">")
+
+
 def fig3(rows, variant):
-    """VAF and R^2 of each element over the conditions, one row of panels per level."""
+    """VAF and R^2 of each element over the conditions, one row of panels per level.
+
+    Markers without lines (the conditions are categories), the elements side by side
+    within each condition; the VAF axis reaches down past the target
+    (:data:`VAF_TARGET`, drawn dashed) so that the margin to it shows to scale, and the
+    R^2 axis spans the same fraction (0.994-1) unless a value lies lower.
+    """
     panels = (("vaf", "VAF [%]", "VAF, perturbation level {level}"),
               ("r2", "R² [-]", "R², perturbation level {level}"))
     return _level_figure(rows, variant, panels, width=13,
@@ -544,12 +614,25 @@ def fig3(rows, variant):
 
 
 def fig4(rows, variant):
-    """Band-mean derived coherence of each element over the conditions."""
+    """Band-mean derived coherence of each element over the conditions (markers)."""
     panels = (("coh", "mean coherence [-]",
                "derived coherence, band mean 0-15 Hz, perturbation level {level}"),)
     return _level_figure(rows, variant, panels, width=9,
                          title="Fig. 4: band-mean derived coherence of each element per "
                                "condition")
+
+
+def _scale(ax, key, values) -> None:
+    """Fig. 3's y axes: the VAF axis from below the target to 100 %, R^2 alike."""
+    low = float(np.nanmin(values)) if len(values) else 100.0
+    if key == "vaf":
+        ax.axhline(VAF_TARGET, color="tab:red", ls="--", lw=1.0,
+                   label=f"target {VAF_TARGET:g} %")
+        bottom = min(VAF_TARGET - 0.1, low - 0.05 * (100.0 - low))
+        ax.set_ylim(bottom, 100.0 + 0.05 * (100.0 - bottom))
+    elif key == "r2":
+        bottom = min(1.0 - (100.0 - VAF_TARGET + 0.1) / 100.0, low - 0.05 * (1.0 - low))
+        ax.set_ylim(bottom, 1.0 + 0.05 * (1.0 - bottom))
 
 
 def _level_figure(rows, variant, panels, *, width, title):
@@ -561,15 +644,26 @@ def _level_figure(rows, variant, panels, *, width, title):
         part = [r for r in sel if r["perturbation"] == level]
         for ax, (key, ylabel, panel_title) in zip(axes[a], panels):
             x = _condition_axis(ax, part, a == len(levels) - 1)
-            for e in _elements(part):
-                ax.plot(x, [r[f"{key}_{e}"] for r in part], "o-", ms=4, label=f"Z{e}")
+            elements = _elements(part)
+            spread = 0.5 / max(len(elements), 1)
+            values = []
+            for j, e in enumerate(elements):
+                y = [r[f"{key}_{e}"] for r in part]
+                values += y
+                ax.plot(x + (j - (len(elements) - 1) / 2) * spread, y,
+                        ELEMENT_MARKERS[j % len(ELEMENT_MARKERS)], ls="none", ms=5,
+                        label=f"Z{e}")
+            _scale(ax, key, np.asarray(values, dtype=float))
+            ax.set_xlim(-0.5, len(part) - 0.5)
             ax.set_ylabel(ylabel)
             ax.set_title(panel_title.format(level=level), fontsize=10)
-    if levels:
-        axes[0, 0].legend(fontsize=8, ncol=4)
+    if levels:  # outside the data, right of the first row
+        handles, labels = axes[0, 0].get_legend_handles_labels()
+        axes[0, -1].legend(handles, labels, fontsize=8, loc="upper left",
+                           bbox_to_anchor=(1.01, 1.0), frameon=False)
     count = len({(r["friction"], r["resolution"], r["perturbation"]) for r in sel})
-    fig.suptitle(f"{title} ({count} condition{'s' if count != 1 else ''}), {variant} "
-                 f"[{VARIANT_LABELS.get(variant, '')}]", fontsize=12)
+    fig.suptitle(f"{title} ({count} condition{'s' if count != 1 else ''})\n{variant} "
+                 f"[{VARIANT_LABELS.get(variant, '')}]", fontsize=11)
     fig.tight_layout()
     return fig
 

@@ -100,8 +100,13 @@ def test_one_joint_inertia_is_I_in_table_and_bode():
     assert "| I [kg m^2] |" in md and "| M [" not in md
     fig = bode(r)
     caption = "\n".join(t.get_text() for t in fig.texts)
-    assert "I = " in caption and "M = " not in caption
-    assert "K = " not in fig._suptitle.get_text()  # parameters are in the caption
+    title = fig._suptitle.get_text()
+    assert "M = " not in caption + title and " M " not in caption
+    # the short title: the recording and K, B, I (in that order) with units and intervals
+    assert title.startswith("ankle: K = ")
+    assert title.index("K = ") < title.index("B = ") < title.index("I = ")
+    assert "N m/rad" in title and "N m s/rad" in title and "kg m²" in title
+    assert "+-" not in caption + title and "±" in title
 
 
 def test_three_joint_bode_is_a_grid_with_phase_masked_out_of_band():
