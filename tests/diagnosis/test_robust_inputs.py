@@ -105,6 +105,38 @@ def test_a_constant_channel_is_refused_naming_the_file_and_channel(tmp_path, sig
                                f"({value:g} {unit}): nothing to diagnose")
 
 
+@pytest.mark.parametrize("scale", [1.0, 1e9, 1e-9])
+def test_a_numerically_constant_angle_is_refused_naming_its_std(tmp_path, scale):
+    """An angle of 0.1 rad plus 1e-12 rad per sample (std 5.77e-9 rad, 5.8e-8 of its
+    magnitude): at rounding level, no perturbation. The first version fitted it and said
+    "convention mismatch: torque sign reversed ... K -21.6"; the check is relative, so the
+    same in any units."""
+    t = position_trial(K=60.0, B=0.8, I=0.012, duration_s=10, record_reference=False,
+                       name="z")
+    n = t.n_samples
+    t.theta = (0.1 + 1e-12 * np.arange(n))[:, None] * scale
+    t.tau_h = t.tau_h * scale
+    folder = _write(tmp_path / "in", t)
+    with pytest.raises(DiagnosisInputError) as info:
+        diagnose(folder, tmp_path / "out", workers=1, progress=False)
+    std = np.std(1e-12 * np.arange(n)) * scale
+    msg = str(info.value)
+    assert msg.startswith(f"{folder / 'z.csv'}: theta[1] is numerically constant (std ")
+    assert float(msg.split("(std ")[1].split(" ")[0]) == pytest.approx(std, rel=1e-2)
+    assert "at most 1e-06" in msg and "\n" not in msg
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_small_but_real_variation_is_not_refused():
+    """A perturbation of 1e-4 of an angle's offset (2e-5 relative std, above the 1e-6
+    threshold) is read."""
+    from diagnosis.inputs import check_signals
+    t = position_trial(K=60.0, B=0.8, I=0.012, duration_s=10, record_reference=False,
+                       name="z")
+    t.theta = 100.0 + t.theta * (1e-2 / np.abs(t.theta).max())
+    check_signals(t, "z.csv")
+
+
 def test_a_plant_fmu_or_rk4_step_with_position_trials_is_refused(tmp_path):
     t = position_trial(K=60.0, B=0.8, I=0.012, duration_s=10, record_reference=False,
                        name="z")
