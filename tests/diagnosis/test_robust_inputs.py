@@ -293,3 +293,60 @@ def test_a_flagged_best_fit_blocks_the_runner_up_in_position_experiments():
     assert choose(True, [flagged, runner], [], 1.0, cfg)[1] == ["wobbling_mass"]
     assert choose(True, [flagged, runner], [], 1.0, cfg, best_only=True)[:2] == \
         ("unexplained", [])
+
+
+def _lab_noref(tmp_path, scale=1.0, sign=1.0, rows=20000):
+    """The example ankle recording without a reference (estimation.examples), its first
+    ``rows`` samples, angle and torque times ``scale`` (torque also times ``sign``)."""
+    import shutil
+
+    import pandas as pd
+
+    from estimation.examples import write_ankle
+    src = tmp_path / "ankle"
+    if not (src / "relaxed_noref.csv").exists():
+        write_ankle(src)
+    d = pd.read_csv(src / "relaxed_noref.csv").iloc[:rows]
+    d["theta[1]"] *= scale
+    d["tau_h[1]"] *= scale * sign
+    folder = tmp_path / f"x{scale:g}_{sign:g}"
+    folder.mkdir()
+    d.to_csv(folder / "z.csv", index=False)
+    shutil.copy(src / "relaxed_noref.json", folder / "z.json")
+    return folder
+
+
+def test_bound_flags_are_in_the_file_units_in_the_verdict_and_the_ranking(tmp_path):
+    """x1e9 trials: the verdict quoted the flagged value in the rescaled units
+    ("gain = -0.1698 at lower search bound") beside a ranking row of gain=-0.6791; now
+    the verdict, the row's parameters and its flags give the file's value, as unscaled."""
+    cfg = DiagnosisConfig(effects=("stretch_reflex",))
+    reps = {s: diagnose(_lab_noref(tmp_path, s), None, workers=1, progress=False,
+                        config=cfg) for s in (1.0, 1e9)}
+    ref, big = reps[1.0], reps[1e9]
+    assert big.conventions and any(c["name"] == "units rescaled" for c in big.conventions)
+    row, brow = ref.ranking[0], big.ranking[0]
+    assert row["at_search_bound"], "the example must give a flagged best fit"
+    gain = brow["params"]["stretch_reflex"]["gain"]
+    assert gain == pytest.approx(row["params"]["stretch_reflex"]["gain"], rel=1e-3)
+    shown = f"gain = {gain:.4g}"
+    assert all(shown in f for f in brow["at_search_bound"] if "gain" in f)
+    assert brow["at_search_bound"] == row["at_search_bound"]
+    assert shown in big.summary
+    assert big.summary == ref.summary
+
+
+def test_the_torque_sign_finding_gives_the_stiffness_in_the_file_units(tmp_path):
+    """A reversed torque on x1e9 trials: the finding's stiffness is the file's (the
+    first version printed the rescaled trials' K)."""
+    cfg = DiagnosisConfig(effects=("stretch_reflex",))
+    texts = {}
+    for s in (1.0, 1e9):
+        rep = diagnose(_lab_noref(tmp_path, s, sign=-1.0), None, workers=1,
+                       progress=False, config=cfg)
+        found = [c for c in rep.conventions if c["name"] == "torque sign reversed"]
+        assert found, rep.summary
+        texts[s] = found[0]
+    k = [float(v) for v in texts[1.0]["evidence"].split("[")[1].split("]")[0].split(",")]
+    kb = [float(v) for v in texts[1e9]["evidence"].split("[")[1].split("]")[0].split(",")]
+    assert k[0] < 0 and kb == pytest.approx(k, rel=1e-3)
