@@ -155,6 +155,36 @@ def test_a_plant_fmu_or_rk4_step_with_position_trials_is_refused(tmp_path):
     assert "Traceback" not in p.stderr
 
 
+def test_an_rk4_step_that_does_not_divide_is_refused_as_not_applicable_first(tmp_path):
+    """Position trials with --rk4-step 3e-6 (not a divisor of 1 ms): the first message
+    said "does not divide ... use rk4_step 3.003e-06 s", and with that step "leave
+    --rk4-step out"; now the first one says the option does not apply."""
+    t = position_trial(K=60.0, B=0.8, I=0.012, duration_s=10, record_reference=False,
+                       name="z")
+    folder = _write(tmp_path / "in", t)
+    with pytest.raises(DiagnosisInputError) as info:
+        diagnose(folder, tmp_path / "out", workers=1, progress=False, rk4_step=3e-6)
+    assert "--rk4-step 3e-06: trials z are position experiments" in str(info.value)
+    assert "leave --rk4-step out" in str(info.value)
+    assert "divide" not in str(info.value)
+
+
+def test_a_plant_experiment_still_refuses_an_rk4_step_that_does_not_divide():
+    """The divisibility check where a plant is simulated (the exoskeleton), with the
+    trial, its rate and the step that would divide."""
+    from types import SimpleNamespace
+
+    from diagnosis.pipeline.conventions import check_plant_options
+    trial = SimpleNamespace(name="e1", fs=1000.0)
+    r = SimpleNamespace(experiment=SimpleNamespace(uses_plant=True, kind="exoskeleton"),
+                        trials=[trial], plant=None, rk4_step=3e-6)
+    with pytest.raises(DiagnosisInputError, match=r"e1: fs = 1000 Hz: .*3e-06 s does not "
+                                                  r"divide .*use rk4_step 3\.003"):
+        check_plant_options(r)
+    r.rk4_step = 5e-6
+    check_plant_options(r)
+
+
 def test_tiny_float64_values_are_not_read_as_integers():
     """Angles of 1e-7 rad printed with 17 digits are float64, not "0 decimals" (an
     absolute tolerance of 1e-6 took them for the integer 0)."""
