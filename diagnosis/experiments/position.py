@@ -52,6 +52,18 @@ class PositionServo(Experiment):
                 f"position trials with and without a recorded theta_ref in one diagnosis "
                 f"({with_ref}): one experiment either tracks a reference or not")
 
+    def __init__(self, trials):
+        super().__init__(trials)
+        self.with_reference = all(t.theta_ref is not None for t in trials)
+
+    def not_applicable(self, name: str) -> str | None:
+        """Also: ``servo_bandwidth`` needs a recorded reference (the servo tracks it)."""
+        why = super().not_applicable(name)
+        if why is None and name == "servo_bandwidth" and not self.with_reference:
+            return ("needs a recorded theta_ref (the servo's reference); these position "
+                    "trials have none, the measured angle drives the limb")
+        return why
+
     def perturbation_signal(self, trial) -> str:
         return "theta_ref" if trial.theta_ref is not None else "theta"
 

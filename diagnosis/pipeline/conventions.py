@@ -26,6 +26,9 @@ def run(r) -> None:
         trials, r.units, found = normalise_units(trials, sources.get)
         findings += found
         r.trials, r.findings = trials, findings
+    from ..catalogue import CATALOGUE
+    if tuple(r.config.effects) != tuple(CATALOGUE):  # a selection (--effects): all usable
+        r.experiment.check_selected_effects(tuple(r.config.effects))
     r.effects = r.experiment.applicable_effects(r.config.effects)
     r.skipped_effects = tuple(e for e in r.config.effects if e not in r.effects)
 

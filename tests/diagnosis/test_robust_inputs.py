@@ -380,3 +380,24 @@ def test_the_torque_sign_finding_gives_the_stiffness_in_the_file_units(tmp_path)
     k = [float(v) for v in texts[1.0]["evidence"].split("[")[1].split("]")[0].split(",")]
     kb = [float(v) for v in texts[1e9]["evidence"].split("[")[1].split("]")[0].split(",")]
     assert k[0] < 0 and kb == pytest.approx(k, rel=1e-3)
+
+
+@pytest.mark.parametrize("effects, bad", [(("gravity",), "gravity: not applicable to the "
+                                            "position experiment"),
+                                           (("servo_bandwidth", "stretch_reflex"),
+                                            "servo_bandwidth: needs a recorded theta_ref")])
+def test_effects_that_do_not_apply_are_refused_up_front(tmp_path, effects, bad):
+    """--effects gravity on position trials said "unexplained: no catalogue effect could
+    be fitted"; now refused before any fit, naming it and listing those that apply."""
+    from diagnosis import catalogue as cat
+    t = position_trial(K=60.0, B=0.8, I=0.012, duration_s=10, record_reference=False,
+                       name="z")
+    folder = _write(tmp_path / "in", t)
+    with pytest.raises(DiagnosisInputError) as info:
+        diagnose(folder, tmp_path / "out", workers=1, progress=False,
+                 config=DiagnosisConfig(effects=effects))
+    msg = str(info.value)
+    usable = [n for n in cat.effects_for("position") if n != "servo_bandwidth"]
+    assert msg.startswith(f"--effects {','.join(effects)}: {bad}")
+    assert f"the effects that apply: {', '.join(usable)} (or leave --effects out" in msg
+    assert not (tmp_path / "out").exists()
