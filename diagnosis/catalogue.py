@@ -294,6 +294,25 @@ def below_detectability(name: str, params: dict) -> bool:
     return all(abs(params[p.name] - p.off) < abs(f - p.off) for p, f in floors)
 
 
+def search_bound_hits(name: str, params: dict, tol: float = BOUND_TOLERANCE) -> list:
+    """``[(param, "lower" | "upper"), ...]``: the scored primary parameters of a fit of
+    ``name`` that lie on a search bound (the structured form of :func:`at_search_bound`,
+    formatted later with values in the file's units, :func:`format_flag`)."""
+    out = []
+    for p in get_effect(name).parameters:
+        if not p.scored or p.name not in params:
+            continue
+        side = p.search_bound_hit(float(params[p.name]), tol)
+        if side is not None:
+            out.append((p.name, side))
+    return out
+
+
+def format_flag(param: str, value: float, note: str) -> str:
+    """``"k_s = 3000 at upper search bound"``: one flag, value shown with 4 digits."""
+    return f"{param} = {float(value):.4g} {note}"
+
+
 def at_search_bound(name: str, params: dict, tol: float = BOUND_TOLERANCE) -> list[str]:
     """The scored primary parameters of a fit of ``name`` that lie on a search bound,
     e.g. ``["k_s = 3000 at upper search bound"]``; empty when none.
@@ -301,14 +320,8 @@ def at_search_bound(name: str, params: dict, tol: float = BOUND_TOLERANCE) -> li
     Unscored parameters (not identifiable by the experiment, e.g. the torque noise of
     ``sensor_noise``) may wander anywhere and are not checked.
     """
-    out = []
-    for p in get_effect(name).parameters:
-        if not p.scored or p.name not in params:
-            continue
-        side = p.search_bound_hit(float(params[p.name]), tol)
-        if side is not None:
-            out.append(f"{p.name} = {float(params[p.name]):.4g} at {side} search bound")
-    return out
+    return [format_flag(k, params[k], f"at {side} search bound")
+            for k, side in search_bound_hits(name, params, tol)]
 
 
 def relative_parameter_error(name: str, fitted: dict, truth: dict, *,

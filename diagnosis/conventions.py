@@ -168,9 +168,11 @@ def check_time(trials) -> list:
     return findings
 
 
-def check_torque_sign(trials, arm, estimate) -> tuple[list, object, list]:
+def check_torque_sign(trials, arm, estimate, k_scale: float = 1.0) -> tuple[list, object, list]:
     """A negative arm stiffness on every joint that turns positive with -tau_h means the
-    torque was logged with the opposite sign. ``estimate(trials) -> ArmModel``."""
+    torque was logged with the opposite sign. ``estimate(trials) -> ArmModel``;
+    ``k_scale``: the factor from the trials' stiffness to the file's units, for the
+    finding's text (rescaled trials, :func:`normalise_units`; 1 otherwise)."""
     if not np.all(np.diag(arm.K) < 0):
         return trials, arm, []
     if not _low_frequency_opposed(arm):
@@ -183,8 +185,14 @@ def check_torque_sign(trials, arm, estimate) -> tuple[list, object, list]:
         return trials, arm, []
     return flipped, arm_f, [Finding(
         "torque sign reversed", "tau_h, all trials",
-        f"arm stiffness estimated {np.round(np.diag(arm.K), 3).tolist()} N m/rad (a "
-        f"passive limb's is positive); {np.round(np.diag(arm_f.K), 3).tolist()} with -tau_h")]
+        f"arm stiffness estimated {_shown(np.diag(arm.K) * k_scale)} N m/rad (a "
+        f"passive limb's is positive); {_shown(np.diag(arm_f.K) * k_scale)} with -tau_h")]
+
+
+def _shown(values) -> list:
+    """Values with 5 significant digits (any units: a rounding to 3 decimals showed
+    a stiffness of 1e-7 as 0)."""
+    return [float(f"{v:.5g}") for v in np.asarray(values, float)]
 
 
 #: the lowest frequencies [Hz] where a passive joint's impedance is stiffness-like (phase

@@ -42,25 +42,53 @@ class EffectFit:
     intervals: dict | None = None
     #: the limb re-estimated with the effect (an experiment whose fit re-estimates it)
     model: object = None
-    #: further reasons never to name this fit (e.g. an unphysical negative gain)
+    #: further reasons never to name this fit, as free text (e.g. from another fitter)
     bound_flags: list = field(default_factory=list)
+    #: further reasons as ``(effect, param, note)``, e.g. ``("stretch_reflex", "gain",
+    #: "< 0 (unphysical)")``: formatted with the value of ``params`` they are shown with
+    value_flags: list = field(default_factory=list)
 
     def simulation_effects(self, n_dof) -> dict:
         return {e: cat.expand_effect(e, self.params[e], n_dof) for e in self.effects}
 
+    def flag_notes(self) -> list:
+        """Every reason never to name this fit, structured: ``[effect, param, note]``
+        (a parameter on a search bound, a value flag) or ``[None, None, text]`` (free
+        text); the values are not in them (:func:`format_flags` adds those)."""
+        notes = [[e, k, f"at {side} search bound"] for e in self.effects
+                 for k, side in cat.search_bound_hits(e, self.params[e])]
+        notes += [[e, k, note] for e, k, note in self.value_flags
+                  if [e, k, note] not in notes]
+        shown = format_flags(notes, self.params)
+        notes += [[None, None, f] for f in self.bound_flags
+                  if not any(f in g for g in shown)]
+        return notes
+
     @property
     def at_search_bound(self) -> list:
         """Scored parameters fitted on a search bound (catalogue.at_search_bound), as
-        ``"effect: param = value at upper search bound"``; such a fit is never named."""
-        return [f"{e}: {flag}" for e in self.effects
-                for flag in cat.at_search_bound(e, self.params[e])] + [
-                    f for f in self.bound_flags
-                    if not any(f in g for g in [", ".join(cat.at_search_bound(
-                        e, self.params[e])) for e in self.effects])]
+        ``"effect: param = value at upper search bound"``, and the other flags; such a
+        fit is never named. Values as fitted (the report shows them in the file's units:
+        :func:`format_flags` on its converted parameters)."""
+        return format_flags(self.flag_notes(), self.params)
 
     @property
     def nameable(self) -> bool:
         return math.isfinite(self.calibration_gap) and not self.at_search_bound
+
+
+def format_flags(notes, params: dict) -> list:
+    """``["effect: param = value note", ...]`` from :meth:`EffectFit.flag_notes` with the
+    values of ``params`` ({effect: {param: value}}), so that flags and parameters shown
+    together are in the same units (a report converts ``params`` to the file's units
+    first)."""
+    out = []
+    for e, k, note in notes:
+        if e is None:
+            out.append(note)
+        else:
+            out.append(f"{e}: " + cat.format_flag(k, params[e][k], note))
+    return out
 
 
 def fit_effect(name: str, ev: Evaluator, base: dict | None = None,

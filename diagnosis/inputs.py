@@ -117,17 +117,27 @@ def source_label(trial, path) -> str:
     return str(path)
 
 
+#: a measured channel whose standard deviation is at most this fraction of its largest
+#: magnitude is "numerically constant": its variation is at the rounding level of the
+#: numbers as stored (1e-6 is ~ 17 float32 steps, the last of 6 printed digits), far below
+#: any encoder or sensor resolution, and carries no perturbation or response to diagnose
+NUMERICALLY_CONSTANT_REL_STD = 1e-6
+
+
 def check_signals(trial, path) -> None:
-    """Refuse a trial with a measured channel that is constant (every sample equal):
-    an angle or torque that never changes carries no response to diagnose, and the
-    spectral estimates divide by its zero power.
+    """Refuse a trial with a measured channel that is constant (every sample equal) or
+    numerically constant (standard deviation <= :data:`NUMERICALLY_CONSTANT_REL_STD` times
+    its largest magnitude): an angle or torque that does not change carries no response to
+    diagnose, and the spectral estimates divide by its (rounding-level) power. The test is
+    relative, so it holds in any units (position trials are scale-free).
 
     Raises
     ------
     DiagnosisInputError
         ``"FILE: tau_h[1] is constant (0 N m): nothing to diagnose"`` (file as given,
         the channel 1-based, its value and unit; ``FILE:NAME`` for a trial of a .mat of
-        several).
+        several), or ``"FILE: theta[1] is numerically constant (std 5.77e-09 rad around
+        0.1 rad, 5.8e-08 of its largest magnitude, at most 1e-06): ..."``.
     """
     where = source_label(trial, path)
     for s, unit in MEASURED_UNITS.items():
@@ -136,10 +146,24 @@ def check_signals(trial, path) -> None:
             continue
         x = np.asarray(x, dtype=float).reshape(len(x), -1)
         for j in range(x.shape[1]):
-            if x.shape[0] and np.all(x[:, j] == x[0, j]):
+            if not x.shape[0]:
+                continue
+            if np.all(x[:, j] == x[0, j]):
                 raise DiagnosisInputError(
                     f"{where}: {s}[{j + 1}] is constant ({x[0, j]:.6g} {unit}): nothing to "
                     f"diagnose")
+            peak = float(np.max(np.abs(x[:, j])))
+            if not np.isfinite(peak) or peak == 0.0:
+                continue  # non-finite values: the format's and the later checks' to name
+            rel = float(np.std(x[:, j] / peak))  # scaled first: no overflow at 1e200
+            if rel <= NUMERICALLY_CONSTANT_REL_STD:
+                mean = float(np.mean(x[:, j] / peak)) * peak
+                raise DiagnosisInputError(
+                    f"{where}: {s}[{j + 1}] is numerically constant (std {rel * peak:.3g} "
+                    f"{unit} around {mean:.6g} {unit}, {rel:.2g} of its largest magnitude, "
+                    f"at most {NUMERICALLY_CONSTANT_REL_STD:g}): its variation is at "
+                    f"rounding level and carries no perturbation or response; nothing to "
+                    f"diagnose (record the channel with its variation)")
 
 
 def split_conditions(trials) -> dict:

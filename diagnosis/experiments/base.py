@@ -89,9 +89,40 @@ class Experiment:
         """The effects of ``names`` that apply to this experiment (catalogue order kept).
 
         An effect applies when its catalogue entry lists this experiment's kind in its
-        ``kinds`` (catalogue.Effect.applies_to).
+        ``kinds`` (catalogue.Effect.applies_to) and :meth:`not_applicable` gives no
+        reason against it.
         """
-        return tuple(n for n in names if CATALOGUE[n].applies_to(self.kind))
+        return tuple(n for n in names if self.not_applicable(n) is None)
+
+    def not_applicable(self, name: str) -> str | None:
+        """Why catalogue effect ``name`` cannot be fitted to these trials (one phrase),
+        or None when it can."""
+        if CATALOGUE[name].applies_to(self.kind):
+            return None
+        return f"not applicable to the {self.kind} experiment ({self.title})"
+
+    def check_selected_effects(self, names) -> None:
+        """Refuse an explicit selection of effects (``--effects``) naming one that does
+        not apply to these trials: silently skipping it left "no catalogue effect could
+        be fitted" as the verdict.
+
+        Raises
+        ------
+        DiagnosisInputError
+            ``"--effects gravity: not applicable to the position experiment (...); the
+            effects that apply: torque_sensor_lag, ... (or leave --effects out for all
+            of them)"``.
+        """
+        from ..errors import DiagnosisInputError
+        bad = [n for n in names if self.not_applicable(n) is not None]
+        if not bad:
+            return
+        usable = self.applicable_effects(tuple(CATALOGUE))
+        reasons = "; ".join(f"{n}: {self.not_applicable(n)}" for n in bad)
+        offer = (f"the effects that apply: {', '.join(usable)} (or leave --effects out for "
+                 f"all of them)" if usable else
+                 "no catalogue effect applies to these trials: leave --effects out")
+        raise DiagnosisInputError(f"--effects {','.join(names)}: {reasons}; {offer}")
 
     # ------------------------------------------------------------------ model
     def estimate(self, trials):

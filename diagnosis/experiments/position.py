@@ -52,6 +52,18 @@ class PositionServo(Experiment):
                 f"position trials with and without a recorded theta_ref in one diagnosis "
                 f"({with_ref}): one experiment either tracks a reference or not")
 
+    def __init__(self, trials):
+        super().__init__(trials)
+        self.with_reference = all(t.theta_ref is not None for t in trials)
+
+    def not_applicable(self, name: str) -> str | None:
+        """Also: ``servo_bandwidth`` needs a recorded reference (the servo tracks it)."""
+        why = super().not_applicable(name)
+        if why is None and name == "servo_bandwidth" and not self.with_reference:
+            return ("needs a recorded theta_ref (the servo's reference); these position "
+                    "trials have none, the measured angle drives the limb")
+        return why
+
     def perturbation_signal(self, trial) -> str:
         return "theta_ref" if trial.theta_ref is not None else "theta"
 
@@ -106,6 +118,7 @@ class PositionServo(Experiment):
             ``significant``, ``threshold``, ``noise_floor``, ``measure``.
         """
         from .. import limbfit as lf
+        from ..catalogue import at_search_bound
         from ..fitting import EffectFit
         cfg = lf.FitConfig(held_out_fraction=1.0 - config.time_split_fraction,
                            effects=tuple(effects))
@@ -140,7 +153,13 @@ class PositionServo(Experiment):
                             objective=f.calibration_objective)
             fit.intervals = None if f.intervals is None else {f.effect: f.intervals}
             fit.model = model_of(f.limb, trials[0].fs, "limbfit with " + f.effect)
-            fit.bound_flags = list(f.at_search_bound)
+            # limbfit's flags as notes (a negative linear gain: unphysical), formatted
+            # with the parameters in the units they are shown in (fitting.format_flags)
+            fit.value_flags = [(f.effect, k, "< 0 (unphysical)")
+                               for k in lf.LINEAR.get(f.effect, ()) if f.params[k] < 0]
+            shown = at_search_bound(f.effect, f.params)  # those EffectFit derives itself
+            fit.bound_flags = [x for x in f.at_search_bound if x not in shown
+                               and not x.endswith("< 0 (unphysical)")]
             out.append(fit)
         return {"fits": out, "g0_cal": g["cal"].value, "g0_held": g["held"].value,
                 "g0_all": g["all"].value, "significant": significant,

@@ -26,6 +26,9 @@ def run(r) -> None:
         trials, r.units, found = normalise_units(trials, sources.get)
         findings += found
         r.trials, r.findings = trials, findings
+    from ..catalogue import CATALOGUE
+    if tuple(r.config.effects) != tuple(CATALOGUE):  # a selection (--effects): all usable
+        r.experiment.check_selected_effects(tuple(r.config.effects))
     r.effects = r.experiment.applicable_effects(r.config.effects)
     r.skipped_effects = tuple(e for e in r.config.effects if e not in r.effects)
 
@@ -33,7 +36,10 @@ def run(r) -> None:
 def check_plant_options(r) -> None:
     """Refuse a plant FMU or an RK4 step for an experiment that simulates no plant (the
     position servo's limb model, the rendered impedance): silently ignoring them would
-    let a user believe their plant was used.
+    let a user believe their plant was used. For a plant experiment, an RK4 step that
+    does not divide the sample period (:func:`check_rk4_divides`). This order makes the
+    first message the one that applies: a position trial is told to leave ``--rk4-step``
+    out, not to use another step.
 
     Raises
     ------
@@ -41,6 +47,7 @@ def check_plant_options(r) -> None:
         Naming the option, the trials and the model the experiment re-simulates.
     """
     if r.experiment.uses_plant:
+        check_rk4_divides(r)
         return
     names = ", ".join(t.name for t in r.trials[:3]) + (" ..." if len(r.trials) > 3 else "")
     what = {"position": "the limb model of diagnosis.limb driven by the measured angle "
@@ -53,3 +60,16 @@ def check_plant_options(r) -> None:
             raise DiagnosisInputError(
                 f"{option} {shown}: trials {names} are {r.experiment.kind} experiments, "
                 f"re-simulated by {what}, not by a plant FMU; leave {option} out")
+
+
+def check_rk4_divides(r) -> None:
+    """Refuse an RK4 step that does not divide the trials' sample period, naming the
+    first trial, its rate and a step that would (orchestrator.trial.check_rk4_step)."""
+    if r.rk4_step is None:
+        return
+    from orchestrator.trial import check_rk4_step
+    first = r.trials[0]
+    try:
+        check_rk4_step(r.rk4_step, 1.0 / first.fs)
+    except ValueError as exc:
+        raise DiagnosisInputError(f"{first.name}: fs = {first.fs:g} Hz: {exc}") from None

@@ -10,6 +10,8 @@ from ..conventions import check_torque_sign
 def run(r) -> None:
     """Fill ``r.model``; a reversed torque sign is corrected and added to the findings."""
     model = r.experiment.estimate(r.trials)
-    trials, model, found = check_torque_sign(r.trials, model, r.experiment.estimate)
+    k_scale = r.units["tau_h"] / r.units["theta"] if r.units else 1.0  # the file's units
+    trials, model, found = check_torque_sign(r.trials, model, r.experiment.estimate,
+                                             k_scale)
     r.trials, r.model = trials, model
     r.findings += found

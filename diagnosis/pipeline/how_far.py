@@ -26,6 +26,8 @@ def ranking_row(fit, g0_cal: float, g0_held: float) -> dict:
             "held_out_reduction": reduction(g0_held, fit.held_out_gap),
             "n_simulations": fit.n_evaluations,
             "at_search_bound": fit.at_search_bound,
+            # the flags' parts, to format them again with the values in the file's units
+            "flag_notes": fit.flag_notes(),
             **({"intervals": fit.intervals} if getattr(fit, "intervals", None) else {})}
 
 

@@ -9,7 +9,9 @@ from ..inputs import load_trials
 
 
 def run(r) -> None:
-    """Fill ``r.trials``; refuse trials too short, unknown effects, a bad RK4 step."""
+    """Fill ``r.trials``; refuse trials too short, unknown effects. (An RK4 step is
+    checked once the experiment is known, pipeline.conventions.check_plant_options: an
+    experiment that simulates no plant refuses any step, before its divisibility.)"""
     cfg = r.config
     trials = r.trials or load_trials(r.source)
     for t in trials:
@@ -19,11 +21,4 @@ def run(r) -> None:
     unknown = [e for e in cfg.effects if e not in cat.CATALOGUE]
     if unknown:
         raise DiagnosisInputError(f"config.effects: unknown effect(s) {unknown}")
-    if r.rk4_step is not None:
-        from orchestrator.trial import check_rk4_step
-        try:
-            check_rk4_step(r.rk4_step, 1.0 / trials[0].fs)
-        except ValueError as exc:
-            raise DiagnosisInputError(f"{trials[0].name}: fs = {trials[0].fs:g} Hz: "
-                                      f"{exc}") from None
     r.trials = trials

@@ -133,6 +133,9 @@ def _row_in_units(row: dict, rho: float) -> dict:
     row["params"] = _effects_in_units(row.get("params") or {}, rho)
     if row.get("intervals"):
         row["intervals"] = _effects_in_units(row["intervals"], rho)
+    if row.get("flag_notes") is not None:  # the flags with the values shown beside them
+        from ..fitting import format_flags
+        row["at_search_bound"] = format_flags(row["flag_notes"], row["params"])
     return row
 
 

@@ -45,8 +45,13 @@ def run(r) -> None:
     amplitude = amplitude_dependence(residual, r.trials)
     if amplitude["amplitude_dependent"] and verdict == VERDICT_EFFECT:
         verdict = VERDICT_PARTLY  # no linear catalogue effect explains that
+    best = r.singles[0] if r.singles else None
+    shown = None
+    if best is not None and r.units:  # rescaled trials: the values in the file's units
+        from .report import _effects_in_units
+        shown = _effects_in_units(best.params, r.units["tau_h"] / r.units["theta"])
     summary = verdict_text(verdict, named, chosen, r.g0_held, residual, amplitude,
-                           best=r.singles[0] if r.singles else None)
+                           best=best, best_params=shown)
     if r.numerics:
         summary += (" Numerical: the plant's RK4 step failed on "
                     + ", ".join(f"{n['trial']} at {n['failed_rk4_step']:.3g} s"
@@ -95,7 +100,8 @@ def choose(significant, singles, pairs, g0_held, cfg, *, best_only: bool = False
     return VERDICT_UNEXPLAINED, [], None
 
 
-def verdict_text(verdict, named, chosen, g0_held, residual, amplitude, best=None) -> str:
+def verdict_text(verdict, named, chosen, g0_held, residual, amplitude, best=None,
+                 best_params=None) -> str:
     """One sentence: the verdict, what the named effect closes, where the rest lies; for
     "unexplained", why the best-ranked fit ``best`` (an EffectFit) was not named."""
     amp = (" The residual is amplitude-dependent (its FRF part differs between "
@@ -104,7 +110,7 @@ def verdict_text(verdict, named, chosen, g0_held, residual, amplitude, best=None
     if verdict == VERDICT_NONE:
         return "no significant gap: the nominal model reproduces the trials within noise."
     if chosen is None:
-        return ("unexplained: " + _not_named(best, g0_held) + "; the gap lies in "
+        return ("unexplained: " + _not_named(best, g0_held, best_params) + "; the gap lies in "
                 + "; ".join(rest_where(residual)) + "." + amp)
     share = 100 * reduction(g0_held, chosen.held_out_gap)
     text = f"{' + '.join(named)} closes {share:.0f} % of the held-out gap"
@@ -114,15 +120,17 @@ def verdict_text(verdict, named, chosen, g0_held, residual, amplitude, best=None
     return f"{verdict}: {text}." + amp
 
 
-def _not_named(best, g0_held) -> str:
+def _not_named(best, g0_held, params=None) -> str:
     """Why the best-ranked fit is not the explanation: a parameter on a search bound (or
-    a non-physical value), or too small a share of the held-out gap."""
+    a non-physical value), or too small a share of the held-out gap. ``params``: the
+    fit's parameters as the report shows them (the file's units), default its own."""
     if best is None or not best.effects:
         return "no catalogue effect could be fitted"
     share = reduction(g0_held, best.held_out_gap)
     what = " + ".join(best.effects) + (f" ({100 * share:.0f} % of the held-out gap)"
                                        if math.isfinite(share) else "")
-    flags = best.at_search_bound
+    from ..fitting import format_flags
+    flags = format_flags(best.flag_notes(), params or best.params)
     if flags:
         return (f"the best fit, {what}, has {'; '.join(flags)}: a fit at a search bound "
                 f"(or with a non-physical value) absorbs model error, so it is not named")

@@ -105,6 +105,38 @@ def test_a_constant_channel_is_refused_naming_the_file_and_channel(tmp_path, sig
                                f"({value:g} {unit}): nothing to diagnose")
 
 
+@pytest.mark.parametrize("scale", [1.0, 1e9, 1e-9])
+def test_a_numerically_constant_angle_is_refused_naming_its_std(tmp_path, scale):
+    """An angle of 0.1 rad plus 1e-12 rad per sample (std 5.77e-9 rad, 5.8e-8 of its
+    magnitude): at rounding level, no perturbation. The first version fitted it and said
+    "convention mismatch: torque sign reversed ... K -21.6"; the check is relative, so the
+    same in any units."""
+    t = position_trial(K=60.0, B=0.8, I=0.012, duration_s=10, record_reference=False,
+                       name="z")
+    n = t.n_samples
+    t.theta = (0.1 + 1e-12 * np.arange(n))[:, None] * scale
+    t.tau_h = t.tau_h * scale
+    folder = _write(tmp_path / "in", t)
+    with pytest.raises(DiagnosisInputError) as info:
+        diagnose(folder, tmp_path / "out", workers=1, progress=False)
+    std = np.std(1e-12 * np.arange(n)) * scale
+    msg = str(info.value)
+    assert msg.startswith(f"{folder / 'z.csv'}: theta[1] is numerically constant (std ")
+    assert float(msg.split("(std ")[1].split(" ")[0]) == pytest.approx(std, rel=1e-2)
+    assert "at most 1e-06" in msg and "\n" not in msg
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_small_but_real_variation_is_not_refused():
+    """A perturbation of 1e-4 of an angle's offset (2e-5 relative std, above the 1e-6
+    threshold) is read."""
+    from diagnosis.inputs import check_signals
+    t = position_trial(K=60.0, B=0.8, I=0.012, duration_s=10, record_reference=False,
+                       name="z")
+    t.theta = 100.0 + t.theta * (1e-2 / np.abs(t.theta).max())
+    check_signals(t, "z.csv")
+
+
 def test_a_plant_fmu_or_rk4_step_with_position_trials_is_refused(tmp_path):
     t = position_trial(K=60.0, B=0.8, I=0.012, duration_s=10, record_reference=False,
                        name="z")
@@ -121,6 +153,36 @@ def test_a_plant_fmu_or_rk4_step_with_position_trials_is_refused(tmp_path):
     assert p.returncode != 0
     assert "--fmu plant.fmu: trials z are position experiments" in p.stderr
     assert "Traceback" not in p.stderr
+
+
+def test_an_rk4_step_that_does_not_divide_is_refused_as_not_applicable_first(tmp_path):
+    """Position trials with --rk4-step 3e-6 (not a divisor of 1 ms): the first message
+    said "does not divide ... use rk4_step 3.003e-06 s", and with that step "leave
+    --rk4-step out"; now the first one says the option does not apply."""
+    t = position_trial(K=60.0, B=0.8, I=0.012, duration_s=10, record_reference=False,
+                       name="z")
+    folder = _write(tmp_path / "in", t)
+    with pytest.raises(DiagnosisInputError) as info:
+        diagnose(folder, tmp_path / "out", workers=1, progress=False, rk4_step=3e-6)
+    assert "--rk4-step 3e-06: trials z are position experiments" in str(info.value)
+    assert "leave --rk4-step out" in str(info.value)
+    assert "divide" not in str(info.value)
+
+
+def test_a_plant_experiment_still_refuses_an_rk4_step_that_does_not_divide():
+    """The divisibility check where a plant is simulated (the exoskeleton), with the
+    trial, its rate and the step that would divide."""
+    from types import SimpleNamespace
+
+    from diagnosis.pipeline.conventions import check_plant_options
+    trial = SimpleNamespace(name="e1", fs=1000.0)
+    r = SimpleNamespace(experiment=SimpleNamespace(uses_plant=True, kind="exoskeleton"),
+                        trials=[trial], plant=None, rk4_step=3e-6)
+    with pytest.raises(DiagnosisInputError, match=r"e1: fs = 1000 Hz: .*3e-06 s does not "
+                                                  r"divide .*use rk4_step 3\.003"):
+        check_plant_options(r)
+    r.rk4_step = 5e-6
+    check_plant_options(r)
 
 
 def test_tiny_float64_values_are_not_read_as_integers():
@@ -261,3 +323,81 @@ def test_a_flagged_best_fit_blocks_the_runner_up_in_position_experiments():
     assert choose(True, [flagged, runner], [], 1.0, cfg)[1] == ["wobbling_mass"]
     assert choose(True, [flagged, runner], [], 1.0, cfg, best_only=True)[:2] == \
         ("unexplained", [])
+
+
+def _lab_noref(tmp_path, scale=1.0, sign=1.0, rows=20000):
+    """The example ankle recording without a reference (estimation.examples), its first
+    ``rows`` samples, angle and torque times ``scale`` (torque also times ``sign``)."""
+    import shutil
+
+    import pandas as pd
+
+    from estimation.examples import write_ankle
+    src = tmp_path / "ankle"
+    if not (src / "relaxed_noref.csv").exists():
+        write_ankle(src)
+    d = pd.read_csv(src / "relaxed_noref.csv").iloc[:rows]
+    d["theta[1]"] *= scale
+    d["tau_h[1]"] *= scale * sign
+    folder = tmp_path / f"x{scale:g}_{sign:g}"
+    folder.mkdir()
+    d.to_csv(folder / "z.csv", index=False)
+    shutil.copy(src / "relaxed_noref.json", folder / "z.json")
+    return folder
+
+
+def test_bound_flags_are_in_the_file_units_in_the_verdict_and_the_ranking(tmp_path):
+    """x1e9 trials: the verdict quoted the flagged value in the rescaled units
+    ("gain = -0.1698 at lower search bound") beside a ranking row of gain=-0.6791; now
+    the verdict, the row's parameters and its flags give the file's value, as unscaled."""
+    cfg = DiagnosisConfig(effects=("stretch_reflex",))
+    reps = {s: diagnose(_lab_noref(tmp_path, s), None, workers=1, progress=False,
+                        config=cfg) for s in (1.0, 1e9)}
+    ref, big = reps[1.0], reps[1e9]
+    assert big.conventions and any(c["name"] == "units rescaled" for c in big.conventions)
+    row, brow = ref.ranking[0], big.ranking[0]
+    assert row["at_search_bound"], "the example must give a flagged best fit"
+    gain = brow["params"]["stretch_reflex"]["gain"]
+    assert gain == pytest.approx(row["params"]["stretch_reflex"]["gain"], rel=1e-3)
+    shown = f"gain = {gain:.4g}"
+    assert all(shown in f for f in brow["at_search_bound"] if "gain" in f)
+    assert brow["at_search_bound"] == row["at_search_bound"]
+    assert shown in big.summary
+    assert big.summary == ref.summary
+
+
+def test_the_torque_sign_finding_gives_the_stiffness_in_the_file_units(tmp_path):
+    """A reversed torque on x1e9 trials: the finding's stiffness is the file's (the
+    first version printed the rescaled trials' K)."""
+    cfg = DiagnosisConfig(effects=("stretch_reflex",))
+    texts = {}
+    for s in (1.0, 1e9):
+        rep = diagnose(_lab_noref(tmp_path, s, sign=-1.0), None, workers=1,
+                       progress=False, config=cfg)
+        found = [c for c in rep.conventions if c["name"] == "torque sign reversed"]
+        assert found, rep.summary
+        texts[s] = found[0]
+    k = [float(v) for v in texts[1.0]["evidence"].split("[")[1].split("]")[0].split(",")]
+    kb = [float(v) for v in texts[1e9]["evidence"].split("[")[1].split("]")[0].split(",")]
+    assert k[0] < 0 and kb == pytest.approx(k, rel=1e-3)
+
+
+@pytest.mark.parametrize("effects, bad", [(("gravity",), "gravity: not applicable to the "
+                                            "position experiment"),
+                                           (("servo_bandwidth", "stretch_reflex"),
+                                            "servo_bandwidth: needs a recorded theta_ref")])
+def test_effects_that_do_not_apply_are_refused_up_front(tmp_path, effects, bad):
+    """--effects gravity on position trials said "unexplained: no catalogue effect could
+    be fitted"; now refused before any fit, naming it and listing those that apply."""
+    from diagnosis import catalogue as cat
+    t = position_trial(K=60.0, B=0.8, I=0.012, duration_s=10, record_reference=False,
+                       name="z")
+    folder = _write(tmp_path / "in", t)
+    with pytest.raises(DiagnosisInputError) as info:
+        diagnose(folder, tmp_path / "out", workers=1, progress=False,
+                 config=DiagnosisConfig(effects=effects))
+    msg = str(info.value)
+    usable = [n for n in cat.effects_for("position") if n != "servo_bandwidth"]
+    assert msg.startswith(f"--effects {','.join(effects)}: {bad}")
+    assert f"the effects that apply: {', '.join(usable)} (or leave --effects out" in msg
+    assert not (tmp_path / "out").exists()
