@@ -99,7 +99,11 @@ def build_parser() -> argparse.ArgumentParser:
 # ----------------------------------------------------------------------------- simulate
 def _add_simulate(sub):
     p = sub.add_parser("simulate", help="simulate one trial and write NAME.csv/.json")
-    p.add_argument("--out", required=True, help="output stem (NAME, without extension)")
+    p.add_argument("--out", required=True, help="output stem (NAME, without extension); an "
+                   "existing NAME.csv/.json is replaced only when it is an earlier simulated "
+                   "trial of this project, or with --force")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing NAME.csv/.json that is not a simulated trial")
     p.add_argument("--friction", type=int, default=0, help="declared friction level 0-3")
     p.add_argument("--resolution", type=int, default=0, help="declared sensor level 0-3")
     p.add_argument("--perturbation", type=int, default=3, help="perturbation level 1-3")
@@ -128,13 +132,14 @@ def _add_simulate(sub):
 
 
 def _simulate(args) -> int:
-    from trialformat import write_trial
+    from trialformat import check_trial_out, write_trial
 
     from .setup import Setup
     from .trial import simulate_trial
 
     dof = None if args.dof == "all" else _int(args.dof, "--dof")
     effects = _json(args.effects, "--effects")
+    check_trial_out(args.out, "--out", force=args.force)  # before the run, never after it
     setup = Setup.reference(args.friction, args.resolution, args.tuning, args.arm)
     check_samples(args.duration, args.fs or setup.fs)
     if args.fs is not None:

@@ -151,6 +151,7 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
     check_fmu(grid_options.get("fmu_path"))
     options = _manifest_options(grid_options)
     check_resume(out, options)  # before any trial is skipped as "already there"
+    check_grid_out(out, tasks)
     out.mkdir(parents=True, exist_ok=True)
     if not (out / MANIFEST).is_file():  # a killed run still says what it was made with
         _write_json(out / MANIFEST, {"format": GRID_FORMAT, "status": "running",
@@ -293,6 +294,32 @@ def check_fmu(fmu_path) -> None:
                          f"the reference plant is used)")
     if not zipfile.is_zipfile(path):
         raise SetupError(f"--fmu {path}: not an FMU (an FMU is a zip archive)")
+
+
+def check_grid_out(out, tasks) -> None:
+    """Refuse a grid folder that is a file, lies below a file, or holds trials of the
+    grid's names (or a ``failures.json``) without the manifest ``grid.json`` of a grid run:
+    those files are not this project's, and would be skipped as done or replaced.
+
+    Raises
+    ------
+    trialformat.errors.OutputError
+    """
+    from trialformat import OutputError, check_out_parent
+
+    out = Path(out)
+    check_out_parent(out, "grid OUT")
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"grid OUT {out}: is an existing file; the grid is a folder: give "
+                          f"a new folder name")
+    if not out.is_dir() or (out / MANIFEST).is_file():
+        return
+    clash = [out / FAILURES] if (out / FAILURES).exists() else []
+    clash += [out / t["name"] for t in tasks if trial_exists(out / t["name"])]
+    if clash:
+        raise OutputError(f"grid OUT {out}: holds {clash[0].name}{'' if clash[0].suffix else '.csv/.json'}"
+                          f" but no {MANIFEST} of a grid run; it is left as it is (its "
+                          f"trials would be counted as done): give a new or empty folder")
 
 
 def check_resume(out, options: dict) -> None:

@@ -130,6 +130,9 @@ def run_paper(out, *, quick=False, tuning="reference", duration_s=None, workers=
                       perturbation_levels=perturbation_levels, arm=arm)
     options = {**plan, "quick": bool(quick),
                "fmu": None if fmu_path is None else Path(fmu_path).name}
+    from trialformat import check_out_parent
+
+    check_out_parent(out, "--out")
     _check_previous(out, options)
     out.mkdir(parents=True, exist_ok=True)
     _write_json(out / PAPER_FILE, {"format": PAPER_FORMAT, "status": "running",
