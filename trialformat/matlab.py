@@ -19,7 +19,7 @@ import numpy as np
 from scipy import io as sio
 
 from .errors import MatFileError
-from .logs import MIN_SAMPLES, SIGNALS, Trial, complete_metadata, finish_trial
+from .logs import MIN_SAMPLES, SIGNALS, Trial, _convention, complete_metadata, finish_trial
 
 OPTIONAL = ("tau_delta", "tau_m", "theta_ref")
 
@@ -36,12 +36,20 @@ def write_trial_mat(path, trial: Trial, *, meta_as: str = "json", version: str =
         Store ``meta`` as a JSON char array or as a MATLAB struct.
     version : {"5", "4"}
         scipy.io's format; v4 holds no struct (use ``meta_as="json"``).
+
+    The signals are stored in the conventions the metadata declare (``sensors.torque_sign``
+    -1: ``tau_h`` negated; ``angles: "absolute"``: ``theta``, ``theta_ref`` plus the posture),
+    like :func:`trialformat.write_trial`, so a trial read back has the same arrays.
     """
     path = Path(path)
     if path.suffix.lower() != ".mat":
         path = path.with_name(path.name + ".mat")
     data = {"t": trial.t[:, None]}
-    data.update({s: trial.signal(s) for s in trial.signals()})
+    # stored in the file's conventions, as write_trial does: the torque_sign and angles the
+    # metadata declare are undone, so that read_trial_mat returns the trial's arrays
+    stored = _convention(trial.meta, trial, inverse=True)
+    data.update({s: np.asarray(stored.get(s, trial.signal(s)), dtype=float)
+                 for s in trial.signals()})
     if meta_as == "json":
         data["meta"] = json.dumps(trial.meta)
     elif meta_as == "struct":
