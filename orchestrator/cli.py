@@ -39,6 +39,9 @@ def main(argv=None) -> int:
 
     if args.plant is not None:  # every subcommand's default plant (grid workers inherit it)
         os.environ["ARMEXO_PLANT"] = args.plant
+        if getattr(args, "fmu", None) is not None:  # said once, not resolved silently
+            print(f"note: the plant is {args.fmu} (--fmu); --plant {args.plant} chooses the "
+                  f"built-in plant only when no FMU is given", file=sys.stderr)
     if not hasattr(args, "func"):
         parser.print_help()
         return 2
@@ -147,6 +150,11 @@ def _simulate(args) -> int:
     if args.no_tde:
         setup = setup.with_controller(time_delay_estimation=False)
     parameters = dict(args.plant_parameter or {})
+    given = parameters.get("rk4_step")
+    if args.rk4_step is not None and given is not None and given != args.rk4_step:
+        raise SetupError(f"--rk4-step {args.rk4_step:g} and --plant-parameter "
+                         f"rk4_step={given:g} disagree; give the plant's RK4 step once "
+                         f"(--rk4-step {args.rk4_step:g})")
     if args.rk4_step is not None:
         from .trial import check_rk4_step
         # refused before the plant loads: the range follows from the communication step
