@@ -264,7 +264,8 @@ def check_out_parent(path: str | os.PathLike, option: str = "--out") -> None:
     for parent in path.parents:
         if parent.exists() or parent.is_symlink():
             if not parent.is_dir():
-                raise OutputError(f"{option} {path}: {parent} is a file, not a folder; give "
+                what = "a file" if parent.exists() else "a link to nothing"
+                raise OutputError(f"{option} {path}: {parent} is {what}, not a folder; give "
                                   f"a path in a folder (e.g. {parent.parent / path.name})")
             return
 

@@ -64,3 +64,47 @@ def test_output_below_a_file_is_refused_up_front(tmp_path, capsys, command):
     rc = main([c.replace("{f}", str(f)) for c in command])
     err = capsys.readouterr().err
     assert rc == 1 and f"{f} is a file, not a folder" in err and "Errno" not in err
+
+
+@pytest.fixture(scope="module")
+def ankle(tmp_path_factory):
+    from estimation.examples import write_ankle
+
+    out = tmp_path_factory.mktemp("ankle")
+    write_ankle(out)
+    return out
+
+
+@pytest.mark.parametrize("command", [
+    ["estimate", "{src}", "--json", "{f}/x.json"],
+    ["figures", "{src}", "--out", "{f}/r"],
+    ["diagnose", "{one}", "--out", "{f}/deeper/d"]])
+def test_report_output_below_a_file_names_the_file(ankle, tmp_path, capsys, command):
+    import shutil
+
+    one = tmp_path / "one"
+    one.mkdir()
+    for p in ankle.glob("relaxed_noref.*"):
+        shutil.copy(p, one)
+    f = tmp_path / "A" / "res.json"
+    f.parent.mkdir()
+    f.write_text("{}")
+    args = [c.replace("{src}", str(ankle)).replace("{one}", str(one)).replace("{f}", str(f))
+            for c in command]
+    rc = main(args)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1 and err, err
+    assert f"{args[-1]}: {f} is a file, not a folder" in err[-1] and "Errno" not in err[-1]
+    assert f.read_text() == "{}"
+
+
+def test_check_out_parent_accepts_missing_folders_and_links(tmp_path):
+    from trialformat import OutputError, check_out_parent
+
+    check_out_parent(tmp_path / "a" / "b" / "c.json", "--json")  # created later
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "real")
+    check_out_parent(tmp_path / "link" / "x", "--out")
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    with pytest.raises(OutputError, match="dangling is a link to nothing, not a folder"):
+        check_out_parent(tmp_path / "dangling" / "x", "--out")
