@@ -239,7 +239,9 @@ def run_estimate(args) -> int:
 
 def _check_json_out(path: Path) -> None:
     """Refuse a ``--json`` that would overwrite anything but an earlier ``--json`` results
-    file: a folder, a trial (``.csv``, ``.csv.gz``, ``.mat``, its metadata), any other file."""
+    file: a folder, a trial (``.csv``, ``.csv.gz``, ``.mat``, its metadata), any other file;
+    a path below a file."""
+    tf.logs.check_out_parent(path, "--json")
     if path.is_dir():
         raise tf.OutputError(f"--json {path}: is a folder; give a file name "
                              f"(e.g. {path / 'results.json'})")

@@ -39,6 +39,9 @@ def main(argv=None) -> int:
 
     if args.plant is not None:  # every subcommand's default plant (grid workers inherit it)
         os.environ["ARMEXO_PLANT"] = args.plant
+        if getattr(args, "fmu", None) is not None:  # said once, not resolved silently
+            print(f"note: the plant is {args.fmu} (--fmu); --plant {args.plant} chooses the "
+                  f"built-in plant only when no FMU is given", file=sys.stderr)
     if not hasattr(args, "func"):
         parser.print_help()
         return 2
@@ -99,7 +102,11 @@ def build_parser() -> argparse.ArgumentParser:
 # ----------------------------------------------------------------------------- simulate
 def _add_simulate(sub):
     p = sub.add_parser("simulate", help="simulate one trial and write NAME.csv/.json")
-    p.add_argument("--out", required=True, help="output stem (NAME, without extension)")
+    p.add_argument("--out", required=True, help="output stem (NAME, without extension); an "
+                   "existing NAME.csv/.json is replaced only when it is an earlier simulated "
+                   "trial of this project, or with --force")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing NAME.csv/.json that is not a simulated trial")
     p.add_argument("--friction", type=int, default=0, help="declared friction level 0-3")
     p.add_argument("--resolution", type=int, default=0, help="declared sensor level 0-3")
     p.add_argument("--perturbation", type=int, default=3, help="perturbation level 1-3")
@@ -128,13 +135,14 @@ def _add_simulate(sub):
 
 
 def _simulate(args) -> int:
-    from trialformat import write_trial
+    from trialformat import check_trial_out, write_trial
 
     from .setup import Setup
     from .trial import simulate_trial
 
     dof = None if args.dof == "all" else _int(args.dof, "--dof")
     effects = _json(args.effects, "--effects")
+    check_trial_out(args.out, "--out", force=args.force)  # before the run, never after it
     setup = Setup.reference(args.friction, args.resolution, args.tuning, args.arm)
     check_samples(args.duration, args.fs or setup.fs)
     if args.fs is not None:
@@ -142,6 +150,11 @@ def _simulate(args) -> int:
     if args.no_tde:
         setup = setup.with_controller(time_delay_estimation=False)
     parameters = dict(args.plant_parameter or {})
+    given = parameters.get("rk4_step")
+    if args.rk4_step is not None and given is not None and given != args.rk4_step:
+        raise SetupError(f"--rk4-step {args.rk4_step:g} and --plant-parameter "
+                         f"rk4_step={given:g} disagree; give the plant's RK4 step once "
+                         f"(--rk4-step {args.rk4_step:g})")
     if args.rk4_step is not None:
         from .trial import check_rk4_step
         # refused before the plant loads: the range follows from the communication step

@@ -151,6 +151,7 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
     check_fmu(grid_options.get("fmu_path"))
     options = _manifest_options(grid_options)
     check_resume(out, options)  # before any trial is skipped as "already there"
+    check_grid_out(out, tasks)
     out.mkdir(parents=True, exist_ok=True)
     if not (out / MANIFEST).is_file():  # a killed run still says what it was made with
         _write_json(out / MANIFEST, {"format": GRID_FORMAT, "status": "running",
@@ -190,7 +191,7 @@ def run_grid(out_dir, *, workers=2, scheduler=None, progress=True, **grid_option
     for t in todo:
         if t["name"] not in results:
             results[t["name"]] = _unreported(out, t)
-    manifest = _manifest(tasks, results, grid_options, time.perf_counter() - start)
+    manifest = _manifest(tasks, results, options, time.perf_counter() - start)
     _write_json(out / MANIFEST, manifest)
     _write_json(out / FAILURES, {"failures": [r for r in manifest["trials"]
                                               if r["status"] == "failed"]})
@@ -278,7 +279,12 @@ def _execute_dask(tasks, out_dir, scheduler):
 #: option: a resumed grid must agree on them, or its skipped trials would be another run's.
 RESUME_CHECKED = {"duration_s": (50.0, "--duration"), "base_seed": (0, "--seed"),
                   "tuning": ("reference", "--tuning"), "effects": (None, "--effects"),
-                  "arm": ("2dof", "--arm"), "fmu": (None, "--fmu")}
+                  "arm": ("2dof", "--arm"), "fmu": (None, "--fmu"),
+                  "plant_parameters": (None, "--plant-parameter")}
+#: The plant's identity, checked besides :data:`RESUME_CHECKED`: the built-in plant kind
+#: (``plant``: c or modelica, when no --fmu; runs recorded before it ran the C plant) and the
+#: given FMU's content (``fmu_sha256``; compared when both runs recorded it).
+PLANT_CHECKED = {"plant": "--plant", "fmu_sha256": "--fmu"}
 
 
 def check_fmu(fmu_path) -> None:
@@ -293,6 +299,32 @@ def check_fmu(fmu_path) -> None:
                          f"the reference plant is used)")
     if not zipfile.is_zipfile(path):
         raise SetupError(f"--fmu {path}: not an FMU (an FMU is a zip archive)")
+
+
+def check_grid_out(out, tasks) -> None:
+    """Refuse a grid folder that is a file, lies below a file, or holds trials of the
+    grid's names (or a ``failures.json``) without the manifest ``grid.json`` of a grid run:
+    those files are not this project's, and would be skipped as done or replaced.
+
+    Raises
+    ------
+    trialformat.errors.OutputError
+    """
+    from trialformat import OutputError, check_out_parent
+
+    out = Path(out)
+    check_out_parent(out, "grid OUT")
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"grid OUT {out}: is an existing file; the grid is a folder: give "
+                          f"a new folder name")
+    if not out.is_dir() or (out / MANIFEST).is_file():
+        return
+    clash = [out / FAILURES] if (out / FAILURES).exists() else []
+    clash += [out / t["name"] for t in tasks if trial_exists(out / t["name"])]
+    if clash:
+        raise OutputError(f"grid OUT {out}: holds {clash[0].name}{'' if clash[0].suffix else '.csv/.json'}"
+                          f" but no {MANIFEST} of a grid run; it is left as it is (its "
+                          f"trials would be counted as done): give a new or empty folder")
 
 
 def check_resume(out, options: dict) -> None:
@@ -318,9 +350,21 @@ def check_resume(out, options: dict) -> None:
     def norm(value):
         return json.dumps(value, sort_keys=True)
 
-    diff = [f"{flag} {previous.get(k, d)!r} there, {options.get(k, d)!r} now"
+    def value(doc, k, d):
+        v = doc.get(k, d)
+        return None if k == "plant_parameters" and not v else v  # {} is none given
+
+    diff = [f"{flag} {value(previous, k, d)!r} there, {value(options, k, d)!r} now"
             for k, (d, flag) in RESUME_CHECKED.items()
-            if norm(previous.get(k, d)) != norm(options.get(k, d))]
+            if norm(value(previous, k, d)) != norm(value(options, k, d))]
+    if previous.get("fmu") is None and options.get("fmu") is None:
+        was, now = previous.get("plant", "c"), options.get("plant", "c")
+        if was != now:
+            diff.append(f"--plant {was!r} there, {now!r} now (the built-in plant)")
+    was, now = previous.get("fmu_sha256"), options.get("fmu_sha256")
+    if was and now and was != now:
+        diff.append(f"--fmu {options.get('fmu')!r} has other content than the FMU of that "
+                    f"run (sha256 {was[:12]}... there, {now[:12]}... now)")
     if diff:
         raise SetupError(f"{out} holds a grid made with other options ({'; '.join(diff)}): "
                          f"its trials would be skipped as done; use another output folder, "
@@ -332,14 +376,35 @@ def _manifest_options(grid_options) -> dict:
                if k != "fmu_path"}
     if "dofs" in options:
         options["dofs"] = [ALL_JOINTS if parse_dof(k) is None else k for k in options["dofs"]]
+    if options.get("plant_parameters"):
+        options["plant_parameters"] = dict(sorted(dict(options["plant_parameters"]).items()))
+    else:
+        options.pop("plant_parameters", None)
     if grid_options.get("fmu_path") is not None:
         options["fmu"] = Path(grid_options["fmu_path"]).name
+        options["fmu_sha256"] = _sha256(grid_options["fmu_path"])
+    else:
+        from .trial import plant_kind
+        options["plant"] = plant_kind()
     return options
 
 
-def _manifest(tasks, results, grid_options, wall_s) -> dict:
+def _sha256(path) -> str | None:
+    """The SHA-256 of a file (the identity of a plant FMU), None when it cannot be read."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(block)
+    except OSError:
+        return None
+    return digest.hexdigest()
+
+
+def _manifest(tasks, results, options, wall_s) -> dict:
     trials = [results[t["name"]] for t in tasks]
-    options = _manifest_options(grid_options)
     return {"format": GRID_FORMAT,
             "seeds": SEED_RULE,
             "options": options, "n_trials": len(trials),

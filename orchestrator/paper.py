@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SetupError
-from .grid import ALL_JOINTS, _write_json, run_grid
+from .grid import ALL_JOINTS, _manifest_options, _write_json, check_resume, run_grid
 
 PAPER_FORMAT = "arm-impedance-paper/1"
 PAPER_FILE = "paper.json"
@@ -38,7 +38,7 @@ QUICK_PLAN = {"friction_levels": [0, 3], "resolution_levels": [0, 3],
               "perturbation_levels": [3], "duration_s": 20.0}
 #: Options that must match between a run and the trials already in its folder.
 _CHECKED = ("friction_levels", "resolution_levels", "perturbation_levels", "dofs",
-            "duration_s", "base_seed", "tuning", "fmu", "arm")
+            "duration_s", "base_seed", "tuning", "fmu", "arm", "plant")
 #: Truth of the report per reference arm (estimation.report.make_report).
 _TRUTH = {"2dof": "table1", "3dof": "reference-3dof"}
 
@@ -128,9 +128,19 @@ def run_paper(out, *, quick=False, tuning="reference", duration_s=None, workers=
     plan = paper_plan(quick=quick, tuning=tuning, duration_s=duration_s, base_seed=base_seed,
                       friction_levels=friction_levels, resolution_levels=resolution_levels,
                       perturbation_levels=perturbation_levels, arm=arm)
+    from .trial import plant_kind
+
     options = {**plan, "quick": bool(quick),
-               "fmu": None if fmu_path is None else Path(fmu_path).name}
+               "fmu": None if fmu_path is None else Path(fmu_path).name,
+               # the built-in plant that runs without --fmu (c or modelica, armimp --plant)
+               "plant": plant_kind() if fmu_path is None else None}
+    from trialformat import check_out_parent
+
+    check_out_parent(out, "--out")
     _check_previous(out, options)
+    # the trials' own record too (the FMU's content, a manifest older than paper.json's
+    # plant key), before paper.json is rewritten
+    check_resume(out / TRIALS_DIR, _manifest_options({**plan, "fmu_path": fmu_path}))
     out.mkdir(parents=True, exist_ok=True)
     _write_json(out / PAPER_FILE, {"format": PAPER_FORMAT, "status": "running",
                                    "options": options})
@@ -218,6 +228,7 @@ def _check_previous(out: Path, options: dict) -> None:
         raise SetupError(f"{path}: not a paper run record ({exc}); remove it or use another "
                          f"--out") from None
     previous.setdefault("arm", "2dof")  # runs made before the option existed
+    previous.setdefault("plant", "c" if previous.get("fmu") is None else None)
     diff = [f"{k}: {previous.get(k)!r} there, {options.get(k)!r} now" for k in _CHECKED
             if previous.get(k) != options.get(k)]
     if diff:

@@ -12,7 +12,8 @@ option errors print at once.
 _EXPORTS = {
     "MatFileError": ".errors", "OutputError": ".errors", "TrialFormatError": ".errors",
     "FORMAT": ".logs", "MIN_SAMPLES": ".logs", "SIGNALS": ".logs", "Trial": ".logs",
-    "atomic_write": ".logs", "check_trial": ".logs", "column_names": ".logs",
+    "atomic_write": ".logs", "check_out_parent": ".logs", "check_trial": ".logs",
+    "check_trial_out": ".logs", "column_names": ".logs",
     "default_metadata": ".logs", "read_trial": ".logs", "read_trials": ".logs",
     "required_columns": ".logs", "trial_exists": ".logs", "trial_stem": ".logs",
     "write_trial": ".logs",

@@ -250,6 +250,64 @@ def with_ending(stem: str | os.PathLike, ending: str) -> Path:
     return stem.with_name(stem.name + ending)
 
 
+def check_out_parent(path: str | os.PathLike, option: str = "--out") -> None:
+    """Refuse an output path below an existing file (``A/res.json/x.json`` where
+    ``A/res.json`` is a file), before anything is written: the nearest existing ancestor
+    of ``path`` must be a folder.
+
+    Raises
+    ------
+    trialformat.errors.OutputError
+        Naming ``option``, ``path`` and the file in the way.
+    """
+    path = Path(path)
+    for parent in path.parents:
+        if parent.exists() or parent.is_symlink():
+            if not parent.is_dir():
+                what = "a file" if parent.exists() else "a link to nothing"
+                raise OutputError(f"{option} {path}: {parent} is {what}, not a folder; give "
+                                  f"a path in a folder (e.g. {parent.parent / path.name})")
+            return
+
+
+def simulated_trial(stem: str | os.PathLike) -> bool:
+    """True when ``stem.json`` is the metadata of a trial this project simulated (this
+    format, with its ``simulation`` block), i.e. the output of an earlier simulate run."""
+    json_path = with_ending(trial_stem(stem), ".json")
+    try:
+        meta = json.loads(json_path.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError, OSError):
+        return False
+    return (isinstance(meta, dict) and isinstance(meta.get("simulation"), dict)
+            and str(meta.get("format", "")).startswith(FORMAT.split("/")[0]))
+
+
+def check_trial_out(stem: str | os.PathLike, option: str = "--out", *,
+                    force: bool = False) -> None:
+    """Refuse to write a trial over files this project did not write.
+
+    ``stem.csv``, ``stem.csv.gz``, ``stem.json`` and ``stem.mat`` that exist are replaced
+    only when ``stem.json`` is a simulated trial of this project (:func:`simulated_trial`)
+    or ``force``; a folder of that name, or a parent that is a file, is always refused.
+
+    Raises
+    ------
+    trialformat.errors.OutputError
+        Naming ``option`` and the file at stake, and what would work.
+    """
+    stem = trial_stem(stem)
+    check_out_parent(stem, option)
+    files = [with_ending(stem, e) for e in (".csv", ".csv.gz", ".json", ".mat")]
+    for f in files:
+        if f.is_dir():
+            raise OutputError(f"{option} {stem}: {f} is a folder; give another trial name")
+    present = [f for f in files if f.exists()]
+    if present and not force and not simulated_trial(stem):
+        raise OutputError(f"{option} {stem}: {present[0]} exists and is not a trial this "
+                          f"project simulated; it is left as it is: give a new name, or "
+                          f"--force to replace it")
+
+
 def check_report_out(out: str | os.PathLike, inputs=(), kinds=None) -> None:
     """Refuse a report folder ``out`` that would replace what this project did not write.
 
@@ -265,6 +323,7 @@ def check_report_out(out: str | os.PathLike, inputs=(), kinds=None) -> None:
         Naming ``out`` and the input or file at stake, and what would work.
     """
     out = Path(out)
+    check_out_parent(out, "--out")
     if out.exists() and not out.is_dir():
         raise OutputError(f"--out {out}: is an existing file; a report is a folder: give a "
                           f"new folder name (e.g. {out.name}_report)")

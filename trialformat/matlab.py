@@ -19,7 +19,7 @@ import numpy as np
 from scipy import io as sio
 
 from .errors import MatFileError
-from .logs import MIN_SAMPLES, SIGNALS, Trial, complete_metadata, finish_trial
+from .logs import MIN_SAMPLES, SIGNALS, Trial, _convention, complete_metadata, finish_trial
 
 OPTIONAL = ("tau_delta", "tau_m", "theta_ref")
 
@@ -36,12 +36,20 @@ def write_trial_mat(path, trial: Trial, *, meta_as: str = "json", version: str =
         Store ``meta`` as a JSON char array or as a MATLAB struct.
     version : {"5", "4"}
         scipy.io's format; v4 holds no struct (use ``meta_as="json"``).
+
+    The signals are stored in the conventions the metadata declare (``sensors.torque_sign``
+    -1: ``tau_h`` negated; ``angles: "absolute"``: ``theta``, ``theta_ref`` plus the posture),
+    like :func:`trialformat.write_trial`, so a trial read back has the same arrays.
     """
     path = Path(path)
     if path.suffix.lower() != ".mat":
         path = path.with_name(path.name + ".mat")
     data = {"t": trial.t[:, None]}
-    data.update({s: trial.signal(s) for s in trial.signals()})
+    # stored in the file's conventions, as write_trial does: the torque_sign and angles the
+    # metadata declare are undone, so that read_trial_mat returns the trial's arrays
+    stored = _convention(trial.meta, trial, inverse=True)
+    data.update({s: np.asarray(stored.get(s, trial.signal(s)), dtype=float)
+                 for s in trial.signals()})
     if meta_as == "json":
         data["meta"] = json.dumps(trial.meta)
     elif meta_as == "struct":
@@ -117,9 +125,13 @@ def _trial_from(path, label, data, name, min_samples) -> Trial:
     n = meta["n_dof"]
     arrays = {"t": _vector(where, data, "t")}
     position = (meta.get("perturbation") or {}).get("kind") == "position"
-    for s in SIGNALS + ("theta_ref",):
-        if s in data or not (s in OPTIONAL and (position or s == "theta_ref")):
-            arrays[s] = _matrix(where, data, s, arrays["t"].size, n)
+    wanted = [s for s in SIGNALS + ("theta_ref",)
+              if s in data or not (s in OPTIONAL and (position or s == "theta_ref"))]
+    declared = (f"n_dof {n} (the default: no n_dof in the metadata)" if "n_dof" in filled
+                else f"the metadata's n_dof: {n}")
+    _check_lengths(where, data, arrays["t"].size, [s for s in wanted if s in data], n)
+    for s in wanted:
+        arrays[s] = _matrix(where, data, s, arrays["t"].size, n, declared)
     return finish_trial(meta, arrays, name, filled, where, min_samples=min_samples)
 
 
@@ -335,17 +347,62 @@ def _vector(path, data, name) -> np.ndarray:
     return arr.ravel()
 
 
-def _matrix(path, data, name, n_samples, n) -> np.ndarray:
+def _rows(arr: np.ndarray, n: int):
+    """Samples of a signal variable: its length as a vector, its rows as N x n, its columns
+    as n x N (transposed); None for another shape (refused by :func:`_matrix`)."""
+    if arr.ndim == 1:
+        return arr.size
+    if arr.ndim == 2 and arr.shape[1] == n:
+        return arr.shape[0]
+    if arr.ndim == 2 and arr.shape[0] == n:
+        return arr.shape[1]
+    if arr.ndim == 2 and 1 in arr.shape:  # a row or column vector where n > 1 columns
+        return max(arr.shape)
+    return None
+
+
+def _check_lengths(where, data, n_samples, names, n) -> None:
+    """Refuse signals whose number of samples differs from t's, naming every variable's
+    length (not the first signal, when t is the short one)."""
+    lengths = {s: _rows(_numeric(where, data[s], s), n) for s in names}
+    lengths = {s: m for s, m in lengths.items() if m is not None}
+    if all(m == n_samples for m in lengths.values()):
+        return
+    groups: dict = {}
+    for s, m in lengths.items():
+        groups.setdefault(m, []).append(s)
+    if len(groups) == 1:
+        (m, names_m), = groups.items()
+        raise MatFileError(f"{where}: t has {n_samples} samples but {', '.join(names_m)} "
+                           f"{'has' if len(names_m) == 1 else 'have'} {m} rows; every variable "
+                           f"needs one row per sample of t (t is {abs(m - n_samples)} "
+                           f"sample{'s' if abs(m - n_samples) != 1 else ''} "
+                           f"{'short' if m > n_samples else 'long'})")
+    text = "; ".join(f"{', '.join(v)} {m} rows" for m, v in sorted(groups.items()))
+    raise MatFileError(f"{where}: variables disagree in length: t {n_samples} samples; "
+                       f"{text}; every variable needs one row per sample of t")
+
+
+def _matrix(path, data, name, n_samples, n, declared=None) -> np.ndarray:
+    declared = declared or f"n_dof {n}"
     if name not in data:
         raise MatFileError(f"{path}: variable '{name}' missing (expected {n_samples} x {n}); "
                            f"the file holds {_holds(data)}")
     arr = _numeric(path, data[name], name)
     if arr.ndim == 1 and n == 1:
         arr = arr[:, None]
-    if arr.shape != (n_samples, n):
-        raise MatFileError(f"{path}: variable '{name}' has shape {arr.shape}, expected "
-                           f"({n_samples}, {n}) for n_dof={n}")
-    return arr
+    if arr.shape == (n_samples, n):
+        return arr
+    if n > 1 and (arr.ndim == 1 or (arr.ndim == 2 and 1 in arr.shape)):
+        raise MatFileError(f"{path}: variable '{name}' has shape {arr.shape}: 1 column where "
+                           f"{declared} needs {n}, one per joint; save it as "
+                           f"{n_samples} x {n} (or declare the joints in n_dof)")
+    if arr.shape == (n, n_samples):
+        raise MatFileError(f"{path}: variable '{name}' has shape {arr.shape}: one row per "
+                           f"joint; save it transposed, {n_samples} x {n} (one column per "
+                           f"joint, {declared})")
+    raise MatFileError(f"{path}: variable '{name}' has shape {arr.shape}, expected "
+                       f"({n_samples}, {n}) for {declared}")
 
 
 def _holds(data) -> str:

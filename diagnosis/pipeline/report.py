@@ -159,6 +159,11 @@ def check_out_dir(out_dir, source) -> None:
         Naming the folder and why.
     """
     out = Path(out_dir)
+    try:  # below a file: refused before anything runs (not an OS error at the end)
+        from trialformat.logs import check_out_parent
+        check_out_parent(out, "--out")
+    except ValueError as exc:
+        raise DiagnosisInputError(str(exc)) from None
     if out.exists() and not out.is_dir():
         raise DiagnosisInputError(f"--out {out}: exists and is a file, not a report folder; "
                                   f"choose another path")

@@ -119,3 +119,16 @@ def test_summary_names_the_truth_and_each_block_normalisation():
     assert "relative to sqrt(X_ii X_kk)" in text
     result["options"]["arm"] = "2dof"
     assert "vs Table I" in "\n".join(orchestrator.paper.summary_lines(result))
+
+
+def test_paper_resumed_with_other_builtin_plant_refused(tmp_path, monkeypatch):
+    from orchestrator.paper import paper_plan
+
+    # a run recorded before the plant key (it ran the C plant), resumed on the Modelica one
+    record = json.dumps({"status": "running",
+                         "options": {**paper_plan(quick=True), "quick": True, "fmu": None}})
+    (tmp_path / "paper.json").write_text(record)
+    monkeypatch.setenv("ARMEXO_PLANT", "modelica")
+    with pytest.raises(SetupError, match="plant: 'c' there, 'modelica' now"):
+        run_paper(tmp_path, quick=True, workers=1, progress=False)
+    assert (tmp_path / "paper.json").read_text() == record

@@ -114,3 +114,50 @@ def test_tractability_with_zero_total_refused_before_any_work(tmp_path):
     with pytest.raises(SetupError, match=r"finite and > 0 \[s\], got \[0\.0\]"):
         run_tractability(tmp_path / "t", ns=(2,), totals_s=(0.0,), progress=False)
     assert not (tmp_path / "t").exists()
+
+
+def test_resumed_grid_with_other_plant_parameters_refused(small_grid, reference_fmu):
+    manifest = (small_grid / "grid.json").read_bytes()
+    with pytest.raises(SetupError, match=r"--plant-parameter None there, "
+                                         r"\{'motor_enable': 0\.0\} now"):
+        run_grid(small_grid, workers=1, progress=False, fmu_path=reference_fmu,
+                 duration_s=0.5, plant_parameters={"motor_enable": 0.0}, **ONE)
+    assert (small_grid / "grid.json").read_bytes() == manifest
+    # an empty set is no parameter given: resumes
+    m = run_grid(small_grid, workers=1, progress=False, fmu_path=reference_fmu,
+                 duration_s=0.5, plant_parameters={}, **ONE)
+    assert m["n_skipped"] == 1
+
+
+@pytest.mark.parametrize("recorded, now, message", [
+    ({}, "modelica", "--plant 'c' there, 'modelica' now"),  # before the key: the C plant
+    ({"plant": "modelica"}, "c", "--plant 'modelica' there, 'c' now")])
+def test_resumed_grid_with_other_builtin_plant_refused(tmp_path, monkeypatch, recorded, now,
+                                                        message):
+    (tmp_path / "grid.json").write_text(json.dumps(
+        {"status": "running", "options": {"duration_s": 0.5, **recorded}}))
+    monkeypatch.setenv("ARMEXO_PLANT", now)  # what armimp --plant sets
+    with pytest.raises(SetupError, match=message):
+        run_grid(tmp_path, workers=1, progress=False, duration_s=0.5, **ONE)
+
+
+def test_resumed_grid_with_an_fmu_of_other_content_refused(tmp_path, reference_fmu,
+                                                           linear_fmu):
+    import shutil
+
+    plant = tmp_path / "plant.fmu"
+    shutil.copyfile(reference_fmu, plant)
+    out = tmp_path / "g"
+    assert run_grid(out, workers=1, progress=False, fmu_path=plant, duration_s=0.5,
+                    **ONE)["n_done"] == 1
+    shutil.copyfile(linear_fmu, plant)  # same name, another plant
+    with pytest.raises(SetupError, match=r"--fmu 'plant.fmu' has other content"):
+        run_grid(out, workers=1, progress=False, fmu_path=plant, duration_s=0.5, **ONE)
+
+
+def test_cli_grid_resumed_with_plant_parameter_refused(small_grid, reference_fmu, capsys):
+    rc = armimp(["grid", str(small_grid), "--workers", "1", "--friction", "0",
+                 "--resolution", "0", "--perturbation", "3", "--dofs", "1", "--duration",
+                 "0.5", "--fmu", str(reference_fmu), "--plant-parameter", "motor_enable=1",
+                 "--no-progress"])
+    assert rc == 1 and "--plant-parameter None there" in capsys.readouterr().err

@@ -48,3 +48,39 @@ def test_plant_parameter_rk4_step_refused_naming_the_plant(tmp_path):
     with pytest.raises(RateError, match=r"rk4_step 1e-20 s: outside .*declares rk4_step min 0 s"):
         simulate_trial(Setup.reference(), perturbed_dof=1, duration_s=0.1,
                        parameters={"rk4_step": 1e-20})
+
+
+def test_cli_refuses_rk4_step_given_twice_with_other_values(tmp_path, capsys, monkeypatch):
+    from orchestrator import cli
+    import orchestrator.trial as trial_mod
+
+    seen = {}
+
+    def fake(*a, parameters=None, **k):  # records what would be simulated
+        seen["parameters"] = parameters
+        raise AssertionError("simulate_trial called")
+    monkeypatch.setattr(trial_mod, "simulate_trial", fake)
+    assert cli.main(["simulate", "--rk4-step", "1e-5", "--plant-parameter", "rk4_step=5e-5",
+                     "--duration", "0.5", "--out", str(tmp_path / "a")]) == 1
+    err = capsys.readouterr().err
+    assert "--rk4-step 1e-05 and --plant-parameter rk4_step=5e-05 disagree" in err
+    assert not seen  # refused before any plant
+    # the same value twice is no conflict
+    with pytest.raises(AssertionError, match="simulate_trial called"):
+        cli.main(["simulate", "--rk4-step", "1e-5", "--plant-parameter", "rk4_step=1e-5",
+                  "--duration", "0.5", "--out", str(tmp_path / "b")])
+    assert seen["parameters"] == {"rk4_step": 1e-5}
+
+
+def test_cli_says_which_plant_runs_when_plant_and_fmu_are_both_given(reference_fmu,
+                                                                     tmp_path, capsys,
+                                                                     monkeypatch):
+    from orchestrator import cli
+
+    monkeypatch.delenv("ARMEXO_PLANT", raising=False)  # restored after main sets it
+
+    assert cli.main(["--plant", "modelica", "simulate", "--fmu", str(reference_fmu),
+                     "--duration", "0.3", "--out", str(tmp_path / "a")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("note:") == 1
+    assert f"the plant is {reference_fmu} (--fmu); --plant modelica chooses" in err

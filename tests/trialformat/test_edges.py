@@ -180,3 +180,52 @@ def test_escape_sequence_header_never_echoed_raw(tmp_path):
     message = str(info.value)
     assert "\x1b" not in message and "\x07" not in message and "\x00" not in message
     assert "\\x1b]0;pwned\\x07" in message
+
+
+# ----------------------------------------------------------------------------- .mat shapes
+def _mat_with(tmp_path, name, fields, meta):
+    sio.savemat(tmp_path / name, {**fields, "meta": json.dumps(meta)})
+    return tmp_path / name
+
+
+def test_mat_t_one_sample_short_names_t_and_the_signals(tmp_path):
+    trial = make_trial()
+    fields = _mat_fields(trial)
+    fields["t"] = fields["t"][:-1]
+    n = trial.n_samples
+    path = _mat_with(tmp_path, "short.mat", fields, trial.meta)
+    with pytest.raises(MatFileError) as info:
+        read(path)
+    text = str(info.value)
+    signals = ", ".join(tf.SIGNALS)  # every signal, t named as the short one
+    assert f"t has {n - 1} samples but {signals} have {n} rows" in text
+    assert "t is 1 sample short" in text and "variable 'theta' has shape" not in text
+
+
+def test_mat_signals_of_different_lengths_all_named(tmp_path):
+    trial = make_trial()
+    fields = _mat_fields(trial)
+    fields["tau_m"] = fields["tau_m"][:-5]
+    n = trial.n_samples
+    path = _mat_with(tmp_path, "mixed.mat", fields, trial.meta)
+    rest = ", ".join(s for s in tf.SIGNALS if s != "tau_m")
+    with pytest.raises(MatFileError, match=rf"disagree in length: t {n} samples; tau_m "
+                                           rf"{n - 5} rows; {rest} {n} rows"):
+        read(path)
+
+
+def test_mat_vector_where_two_joints_are_declared_says_one_column(tmp_path):
+    trial = make_trial()
+    assert trial.n_dof == 2 and trial.meta["n_dof"] == 2
+    fields = _mat_fields(trial)
+    fields["theta"] = fields["theta"][:, 0]  # a plain vector
+    n = trial.n_samples
+    path = _mat_with(tmp_path, "vec.mat", fields, trial.meta)
+    with pytest.raises(MatFileError, match=rf"variable 'theta' has shape \({n}, ?1?\): 1 "
+                                           rf"column where the metadata's n_dof: 2 needs 2"):
+        read(path)
+    fields["theta"] = _mat_fields(trial)["theta"].T  # one row per joint
+    path = _mat_with(tmp_path, "rows.mat", fields, trial.meta)
+    with pytest.raises(MatFileError, match=rf"shape \(2, {n}\): one row per joint; save it "
+                                           rf"transposed, {n} x 2"):
+        read(path)

@@ -433,3 +433,33 @@ def test_absolute_angles_become_deviations(tmp_path):
     tf.write_trial(tmp_path / "b", trial)  # written back in the file's convention
     back = pd.read_csv(tmp_path / "b.csv")
     np.testing.assert_allclose(back["theta[1]"], absolute["theta[1]"], rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("version, meta_as", [("5", "json"), ("5", "struct"), ("4", "json")])
+def test_mat_writer_restores_sign_and_angle_conventions(tmp_path, version, meta_as):
+    """write_trial_mat stores the file's conventions like write_trial: every round trip
+    (CSV -> .mat -> CSV) gives back the same arrays, with torque_sign -1 and absolute angles."""
+    cols = values()
+    posture = [62.708, 77.26]
+    raw = dict(cols)
+    for j in (1, 2):
+        raw[f"theta[{j}]"] = cols[f"theta[{j}]"] + np.deg2rad(posture[j - 1])
+    w_pandas_kw()(tmp_path / "a", raw)
+    meta = metadata(angles="absolute", posture_deg=posture)
+    meta["sensors"]["torque_sign"] = -1
+    write_json(tmp_path / "a", meta)
+    trial = tf.read_trial(tmp_path / "a.csv")
+    path = tf.write_trial_mat(tmp_path / "a.mat", trial, meta_as=meta_as, version=version)
+    stored = sio.loadmat(path)
+    # the file holds the raw values, as the CSV did
+    np.testing.assert_array_equal(stored["tau_h"][:, 0], raw["tau_h[1]"])
+    np.testing.assert_allclose(stored["theta"][:, 1], raw["theta[2]"], rtol=0, atol=1e-15)
+    back = tf.read_trial_mat(path)
+    for s in tf.SIGNALS:
+        np.testing.assert_allclose(back.signal(s), trial.signal(s), rtol=0, atol=1e-15,
+                                   err_msg=s)
+    assert back.tau_h[0, 0] == trial.tau_h[0, 0] == -raw["tau_h[1]"][0]
+    tf.write_trial(tmp_path / "b", back)  # and on to CSV: the first file's values again
+    again = pd.read_csv(tmp_path / "b.csv")
+    np.testing.assert_array_equal(again["tau_h[1]"], raw["tau_h[1]"])
+    np.testing.assert_allclose(again["theta[1]"], raw["theta[1]"], rtol=0, atol=1e-15)
