@@ -865,6 +865,10 @@ SIGN_PHASE_DEG = 135.0
 #: Mean angle beyond this many standard deviations (and ABSOLUTE_MIN_RAD) reads as
 #: absolute angles logged as deviations.
 ABSOLUTE_SIGMAS, ABSOLUTE_MIN_RAD = 3.0, 0.02
+#: Angles in degrees: a deviation from the mean angle beyond DEGREES_LIMIT_RAD (no joint's
+#: perturbation moves it 2 rad, 115 deg) that is a plausible one (< DEGREES_PLAUSIBLE_RAD)
+#: read as degrees. The rule of the diagnosis' conventions check (diagnosis/conventions.py).
+DEGREES_LIMIT_RAD, DEGREES_PLAUSIBLE_RAD = 2.0, 0.5
 
 
 def convention_warnings(result, trials) -> list[str]:
@@ -876,6 +880,10 @@ def convention_warnings(result, trials) -> list[str]:
       0 deg at low frequency. Key: ``sensors.torque_sign``.
     - ``absolute angles?``: a joint's mean angle beyond ABSOLUTE_SIGMAS standard
       deviations and ABSOLUTE_MIN_RAD while the file declares deviations. Key: ``angles``.
+    - ``angles in degrees?``: a joint's largest deviation from its mean angle beyond
+      DEGREES_LIMIT_RAD (2 rad) while the same number read as degrees is below
+      DEGREES_PLAUSIBLE_RAD (0.5 rad). No key declares degrees: theta must be stored in
+      rad (log-format.md); K, B, I scale by 180/pi once it is.
     """
     out, n = [], result.n_dof
     fit = result.fit
@@ -899,12 +907,31 @@ def convention_warnings(result, trials) -> list[str]:
                        f"\"sensors\": {{\"torque_sign\": {want}}} in the metadata or "
                        f"the .mat's sidecar NAME.json (now {now}), or give --torque-sign "
                        f"{want if len(signs) == 1 else -1}; the reader then negates tau_h")
+    degrees = set()
+    for t in trials:
+        if t.theta is None:
+            continue
+        dev = np.max(np.abs(t.theta - t.theta.mean(axis=0)), axis=0)
+        for j in range(t.n_dof):
+            if DEGREES_LIMIT_RAD < dev[j] and np.radians(dev[j]) < DEGREES_PLAUSIBLE_RAD:
+                degrees.add((t.name, j))
+                k = fit.K[j, j] * 180 / np.pi
+                out.append(f"angles in degrees? {t.name}: theta[{j + 1}] deviates up to "
+                           f"{dev[j]:.4g} rad from its mean (std {t.theta[:, j].std():.3g} "
+                           f"rad), beyond the {DEGREES_LIMIT_RAD:g} rad a joint's "
+                           f"perturbation can move it; read as degrees it is "
+                           f"{np.radians(dev[j]):.3g} rad. theta must be in rad "
+                           f"(log-format.md; no metadata key declares degrees): store "
+                           f"theta[{j + 1}] * pi/180; K, B, {symbol_of('M', n)} are then "
+                           f"180/pi = 57.3 times these (K{_e(j, j, n)} about {k:.4g} "
+                           f"{UNITS['K']})")
     for t in trials:
         if t.meta.get("angles") == "absolute" or t.theta is None:
             continue
         m, sd = t.theta.mean(axis=0), t.theta.std(axis=0)
         for j in range(t.n_dof):
-            if abs(m[j]) > max(ABSOLUTE_SIGMAS * sd[j], ABSOLUTE_MIN_RAD):
+            if (t.name, j) not in degrees and abs(m[j]) > max(ABSOLUTE_SIGMAS * sd[j],
+                                                              ABSOLUTE_MIN_RAD):
                 out.append(f"absolute angles? {t.name}: theta[{j + 1}] has mean "
                            f"{m[j]:.4g} rad ({np.degrees(m[j]):.3g} deg), "
                            f"{abs(m[j]) / sd[j]:.1f} times its standard deviation, while "
