@@ -212,8 +212,9 @@ def _report_failures(failures, results) -> int:
             raise EstimationError(failures[0][1])
         raise EstimationError("no condition could be estimated: " + "; ".join(
             f"{label}: {message}" for label, message in failures))
-    for label, message in failures:
-        print(f"error: {label}: {message}", file=sys.stderr)
+    for label, message in failures:  # a message naming its recording is not prefixed
+        prefix = "" if message.startswith(f"{label}: ") else f"{label}: "
+        print(f"error: {prefix}{message}", file=sys.stderr)
     return 1 if failures else 0
 
 

@@ -414,6 +414,7 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
     trials = unit.trials
     method = default_method(trials) if options.method == "auto" else options.method
     usable = _usable(trials, method)
+    check_not_constant(usable, method)
     fs = usable[0].fs
     welch = options.welch()
     whole = estimate_impedance(usable, method=method, band_hz=(0.0, fs / 2),
@@ -472,6 +473,45 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
                             f"{s['reason'].removeprefix('reflex fit: ')}"
                             for s in result.reflex_not_fitted if s["kind"] != "joints"]
     return result
+
+
+#: A signal whose peak-to-peak range is at most this fraction of its largest magnitude
+#: (or exactly 0) is constant to the estimate: after the mean is removed nothing but
+#: rounding is left (0.1 + 1e-12 n over 60000 samples: 6e-7).
+CONSTANT_REL = 1e-6
+_SIGNAL_UNITS = {"theta": "rad", "theta_ref": "rad", "tau_h": "N m", "tau_delta": "N m"}
+
+
+def check_not_constant(trials, method) -> None:
+    """Refuse a set whose estimate would divide by a zero spectrum: a constant (or
+    numerically constant, :data:`CONSTANT_REL`) ``theta``, ``tau_h`` or perturbation
+    (``theta_ref``/``tau_delta``, not for ``direct``) of a perturbed joint (every joint
+    of an all-joints trial). EstimationError ``"[NAME: ]tau_h[1] is constant (1.5 N m):
+    nothing to estimate"``."""
+    for t in trials:
+        names = ["theta", "tau_h"]
+        if method != "direct":
+            names.append("theta_ref" if t.perturbation_kind == "position" else "tau_delta")
+        joints = range(t.n_dof) if t.perturbed_dof is None else [t.perturbed_dof - 1]
+        for name in names:
+            x = getattr(t, name)
+            if x is None:
+                continue
+            for j in joints:
+                col = np.asarray(x[:, j], dtype=float)
+                if not np.all(np.isfinite(col)):
+                    continue
+                ptp = float(np.ptp(col))
+                if ptp <= CONSTANT_REL * float(np.max(np.abs(col))):
+                    value = (f"{col[0]:.6g}" if ptp == 0 else
+                             f"{col.mean():.6g}, range {ptp:.2g}") + f" {_SIGNAL_UNITS[name]}"
+                    if name == "tau_h" and (t.meta.get("sensors") or {}).get(
+                            "torque_sign", 1) == -1:
+                        value += " as read, sensors.torque_sign -1 applied"
+                    raise EstimationError(
+                        f"{t.name}: {name}[{j + 1}] is {'constant' if ptp == 0 else 'numerically constant'} "
+                        f"({value}): nothing to estimate (check the "
+                        f"column holds the recorded signal)")
 
 
 def few_segments_warning(trials, result) -> list[str]:

@@ -567,11 +567,17 @@ def reflex_warnings(r: ReflexResult, options: ReflexOptions) -> list:
 def fit_reflex_trial(trial, options: ReflexOptions | None = None) -> ReflexResult:
     """:func:`fit_reflex` on a one-joint trialformat.Trial (its ``theta`` and ``tau_h``).
 
-    Raises EstimationError for a trial of several joints.
+    Raises ReflexNotApplicable for a trial of several joints (kind ``"joints"``) or a
+    constant ``theta`` or ``tau_h`` (kind ``"constant"``: estimation.lab.check_not_constant).
     """
     if trial.n_dof != 1:
         raise ReflexNotApplicable(f"the reflex model is for one joint; trial {trial.name!r} "
                                   f"has {trial.n_dof} joints", kind="joints")
+    from .lab import check_not_constant
+    try:
+        check_not_constant([trial], "direct")
+    except EstimationError as exc:
+        raise ReflexNotApplicable(f"reflex fit: {exc}", kind="constant") from None
     return fit_reflex(trial.theta[:, 0], trial.tau_h[:, 0], trial.fs, options,
                       name=trial.name, joint=1)
 
@@ -593,7 +599,9 @@ def reflex_of_trials(trials, options=True) -> tuple[list, list]:
     for each other one, ``{"trial", "reason", "kind"}`` with ``kind`` ``"joints"`` (a
     trial of several joints: the model is for one), ``"short"`` (fewer samples than
     :func:`minimum_samples`; the reason names the minimum) or ``"rate"`` (sampled too
-    slowly for the fit's low-pass). Other errors (bad options, non-finite data) raise."""
+    slowly for the fit's low-pass), ``"constant"`` (a constant angle or torque) or
+    ``"singular"`` (linearly dependent regressors: a
+    constant angle). Other errors (bad options, non-finite data) raise."""
     opts = options if isinstance(options, ReflexOptions) else ReflexOptions()
     opts.check()
     fitted, skipped = [], []
@@ -607,6 +615,11 @@ def reflex_of_trials(trials, options=True) -> tuple[list, list]:
             fitted.append(fit_reflex_trial(t, opts))
         except ReflexNotApplicable as exc:
             skipped.append({"trial": t.name, "kind": exc.kind, "reason": str(exc)})
+        except np.linalg.LinAlgError as exc:  # a constant or degenerate angle or torque
+            skipped.append({"trial": t.name, "kind": "singular", "reason": (
+                f"reflex fit: the regressors of {t.name!r} (angle, velocity, acceleration, "
+                f"delayed velocity) are linearly dependent ({exc}): is an angle or torque "
+                f"column constant?")})
     return fitted, skipped
 
 

@@ -38,3 +38,36 @@ def test_angles_in_degrees_are_named_with_the_k_in_radians(tmp_path, capsys):
     _write(tmp_path / "rad", "rad", trial)
     main(["estimate", str(tmp_path / "rad" / "rad.csv")])
     assert "angles in degrees" not in capsys.readouterr().out
+
+
+def _constant(trial, column, value):
+    x = getattr(trial, column).copy()
+    x[:] = value
+    return tf.Trial(**{**trial.__dict__, column: x})
+
+
+@pytest.mark.parametrize("reflex", [[], ["--reflex"]])
+@pytest.mark.parametrize("column,value,text", [
+    ("tau_h", 1.5, "bad: tau_h[1] is constant (1.5 N m): nothing to estimate"),
+    ("theta", 0.1 + 1e-12 * np.arange(20000)[:, None],
+     "bad: theta[1] is numerically constant (0.1, range 2e-08 rad): nothing to estimate")])
+def test_a_constant_signal_fails_its_recording_only(tmp_path, capsys, column, value, text,
+                                                     reflex):
+    good = _trial()
+    _write(tmp_path, "good", good)
+    _write(tmp_path, "bad", _constant(_trial(), column, value))
+    status = main(["estimate", str(tmp_path), "--segments", "0"] + reflex)
+    cap = capsys.readouterr()
+    assert status == 1
+    assert f"error: {text}" in cap.err, cap.err
+    assert "DLASCL" not in cap.err and "SVD" not in cap.err
+    assert re.search(r"good: method=", cap.out), cap.out  # the good recording estimated
+    if reflex:
+        assert "reflex" in cap.out.lower()
+
+
+def test_a_singular_reflex_design_is_skipped_not_raised():
+    from estimation.reflex import reflex_of_trials
+    fitted, skipped = reflex_of_trials([_constant(_trial(), "theta", 0.0)])
+    assert not fitted and skipped[0]["kind"] == "constant", skipped
+    assert "theta[1] is constant (0 rad)" in skipped[0]["reason"]
