@@ -227,15 +227,28 @@ def run_estimate(args) -> int:
     results = lab_results(trials, options, args.truth, failures)
     status = _report_failures(failures, results)
     for r in results:
-        print(describe(r))
+        print(describe(r, args.torque_sign))
     _reflex_note(results)
     if args.json:
-        doc = [{**r.to_json(), "condition": r.label,
+        recorded = recorded_options(options, args)
+        doc = [{**r.to_json(), "condition": r.label, "options": recorded,
                 "compensated": r.corrections["left_limit_sampling"],
                 "leakage_removed": r.corrections["window_leakage"]} for r in results]
         args.json.parent.mkdir(parents=True, exist_ok=True)
         tf.atomic_write(args.json, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
     return status if results else 1
+
+
+def recorded_options(options, args) -> dict:
+    """The analysis options as recorded in ``results.json`` and ``--json``: the
+    AnalysisOptions fields and ``torque_sign`` (``--torque-sign``: +-1, or None when the
+    metadata's ``sensors.torque_sign`` was used)."""
+    from dataclasses import asdict, is_dataclass
+    out = dict(options.__dict__)
+    if is_dataclass(out.get("reflex")):
+        out["reflex"] = asdict(out["reflex"])
+    out["torque_sign"] = args.torque_sign
+    return out
 
 
 def _check_json_out(path: Path) -> None:
@@ -260,15 +273,18 @@ def _check_json_out(path: Path) -> None:
                                  f"of 'estimate --json' (a trial, its metadata or another "
                                  f"file would be replaced); give a new file name")
 
-def describe(r) -> str:
-    """Text of one result: set-up line, one line per element, the warnings."""
+def describe(r, torque_sign=None) -> str:
+    """Text of one result: set-up line, one line per element, the warnings.
+    ``torque_sign`` (``--torque-sign``, +-1) is said in the set-up line when given."""
     from .lab import UNITS, WEIGHTING_TEXT, element_indices, symbol_of as symbol
     c = r.corrections
+    sign = ("" if torque_sign is None else
+            f"; torque sign {torque_sign:+d} (--torque-sign, over the metadata)")
     lines = [f"{r.label}: method={r.method}, trials={', '.join(r.trials)} ({r.reason}); "
              f"band {r.band_hz[0]:g}-{r.band_hz[1]:g} Hz ({r.band_source}), "
              f"{r.n_segments} segments; "
              f"sampling correction {'on' if c['left_limit_sampling'] else 'off'}, "
-             f"leakage correction {'on' if c['window_leakage'] else 'off'}",
+             f"leakage correction {'on' if c['window_leakage'] else 'off'}{sign}",
              f"  fit: {WEIGHTING_TEXT[r.weighting]} ({r.weighting})"]
     conf = int(round(100 * r.fit.confidence))
     for i, k in element_indices(r.n_dof):
@@ -350,9 +366,9 @@ def run_figures(args) -> int:
         results = lab_results(trials, options, truth, failures)
         status = _report_failures(failures, results)
         files = write_lab_report(results, args.out, options={
-            **options.__dict__, "truth": truth})
+            **recorded_options(options, args), "truth": truth})
         for r in results:
-            print(describe(r))
+            print(describe(r, args.torque_sign))
         _reflex_note(results)
     for f in files:
         print(f)

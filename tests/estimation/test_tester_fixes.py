@@ -71,3 +71,21 @@ def test_a_singular_reflex_design_is_skipped_not_raised():
     fitted, skipped = reflex_of_trials([_constant(_trial(), "theta", 0.0)])
     assert not fitted and skipped[0]["kind"] == "constant", skipped
     assert "theta[1] is constant (0 rad)" in skipped[0]["reason"]
+
+
+def test_torque_sign_is_recorded_in_the_header_the_json_and_results_json(tmp_path, capsys):
+    trial = _trial()
+    _write(tmp_path / "in", "rec", tf.Trial(**{**trial.__dict__, "tau_h": -trial.tau_h}))
+    main(["estimate", str(tmp_path / "in"), "--torque-sign", "-1", "--segments", "0",
+          "--json", str(tmp_path / "r.json")])
+    assert "torque sign -1 (--torque-sign" in capsys.readouterr().out
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc[0]["options"]["torque_sign"] == -1
+    main(["figures", str(tmp_path / "in"), "--out", str(tmp_path / "rep"), "--segments", "0",
+          "--torque-sign", "-1"])
+    assert "torque sign -1 (--torque-sign" in capsys.readouterr().out
+    doc = json.loads((tmp_path / "rep" / "results.json").read_text())
+    assert doc["options"]["torque_sign"] == -1
+    main(["estimate", str(tmp_path / "in"), "--segments", "0", "--json",
+          str(tmp_path / "r.json")])
+    assert json.loads((tmp_path / "r.json").read_text())[0]["options"]["torque_sign"] is None
