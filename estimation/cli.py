@@ -23,6 +23,11 @@ from trialformat.cliargs import MAX_FFT, number
 from .names import METHODS, PAPER, RECOMMENDED, WEIGHTINGS
 
 TRUTHS = ("none", "table1", "reference-3dof")
+#: --reflex-* search ranges: option, ReflexOptions field, unit, largest value, default
+#: (estimation.reflex.ReflexOptions; kept here so that --help loads no numpy), example
+REFLEX_RANGES = (("--reflex-delay-ms", "delay_ms", "ms", 1000.0, (10.0, 120.0), "10 250"),
+                 ("--reflex-cutoff-hz", "cutoff_hz", "Hz", 1000.0, (0.5, 20.0), "0.5 40"),
+                 ("--reflex-damping", "damping", "-", 100.0, (0.3, 2.0), "0.2 3"))
 
 
 def _analysis_arguments(p, truth_default="none") -> None:
@@ -67,6 +72,11 @@ def _analysis_arguments(p, truth_default="none") -> None:
                    help="also fit intrinsic K, B, I + a reflex pathway (delayed velocity, "
                         "half-wave rectified, 2nd-order low-pass) to each one-joint trial "
                         "in the time domain (estimation.reflex; docs/estimation.md)")
+    for opt, attr, unit, hi, default, ex in REFLEX_RANGES:
+        g.add_argument(opt, nargs=2, metavar=("LO", "HI"), default=None,
+                       type=number(opt, 0, hi, ex, unit=unit),
+                       help=f"with --reflex: search range of the reflex {attr} [{unit}] "
+                            f"(default {default[0]:g} {default[1]:g})")
     g.add_argument("--torque-sign", type=int, choices=(1, -1), default=None,
                    help="-1: the recordings' torque has the opposite sign to the angle's "
                         "convention (as metadata sensors.torque_sign, which it overrides: "
@@ -110,6 +120,32 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_figures)
 
 
+def _reflex_options(args):
+    """``--reflex`` and its ``--reflex-*`` ranges: False, True (the defaults) or a
+    ReflexOptions. A range without --reflex, or LO >= HI, is refused naming the option."""
+    given = {attr: tuple(getattr(args, attr_of(opt)))
+             for opt, attr, *_ in REFLEX_RANGES if getattr(args, attr_of(opt), None)}
+    reflex = getattr(args, "reflex", False)
+    for opt, attr, *_, ex in REFLEX_RANGES:
+        if attr in given:
+            lo, hi = given[attr]
+            if not reflex:
+                raise ValueError(f"{opt} sets a search range of the reflex fit: add --reflex")
+            if not lo < hi:
+                raise ValueError(f"{opt} {lo:g} {hi:g}: LO must be below HI (e.g. {opt} {ex})")
+    if not (reflex and given):
+        return reflex
+    from .reflex import ReflexOptions
+    opts = ReflexOptions(**given)
+    opts.check()
+    return opts
+
+
+def attr_of(option: str) -> str:
+    """argparse's attribute name of ``option``."""
+    return option.lstrip("-").replace("-", "_")
+
+
 def options_from(args):
     from .lab import AnalysisOptions
     options = AnalysisOptions(
@@ -118,7 +154,7 @@ def options_from(args):
         sampling_correction="off" if args.raw else args.sampling_correction,
         leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool,
         weighting=args.weighting, segments=args.segments,
-        reflex=getattr(args, "reflex", False))
+        reflex=_reflex_options(args))
     options.check()
     return options
 

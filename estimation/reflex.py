@@ -228,8 +228,11 @@ def _prepare(theta, tau, fs, options) -> _Work:
         raise ReflexNotApplicable(f"reflex fit: lowpass_hz {options.lowpass_hz:g} Hz too close "
                                   f"to the working Nyquist frequency {fw / 2:g} Hz (the "
                                   f"recording is sampled at {fs:g} Hz; at least "
-                                  f"{2 * options.lowpass_hz / 0.8:g} Hz needed); raise work_fs",
-                                  kind="rate")
+                                  f"{2 * options.lowpass_hz / 0.8:g} Hz needed): "
+                                  + (f"record at {2 * options.lowpass_hz / 0.8:g} Hz or "
+                                     f"faster" if q == 1 else
+                                     f"raise ReflexOptions.work_fs (now {options.work_fs:g}"
+                                     f" Hz)"), kind="rate")
     sos = signal.butter(4, options.lowpass_hz, fs=fs, output="sos")
     th = signal.sosfiltfilt(sos, theta)[::q]
     tq = signal.sosfiltfilt(sos, tau)[::q]
@@ -553,8 +556,13 @@ def reflex_warnings(r: ReflexResult, options: ReflexOptions) -> list:
                        f"no reflex identified in {rng[0]:g}-{rng[1]:g} ms")
         elif np.isclose(r.values[p], rng[0], rtol=1e-3) or np.isclose(r.values[p], rng[1],
                                                                       rtol=1e-3):
-            out.append(f"{p} = {r.values[p]:.4g} is at the edge of its search range {rng}: "
-                       f"widen the range")
+            opt = "--reflex-" + {"delay_ms": "delay-ms", "cutoff_hz": "cutoff-hz",
+                                 "damping": "damping"}[p]
+            lo, hi = rng
+            wider = (lo / 2, hi) if np.isclose(r.values[p], lo, rtol=1e-3) else (lo, 2 * hi)
+            out.append(f"{p} = {r.values[p]:.4g} is at the edge of its search range "
+                       f"{lo:g}-{hi:g}: widen the range (e.g. {opt} {wider[0]:g} "
+                       f"{wider[1]:g}; ReflexOptions.{p} in the API)")
     if not r.resists_stretch and gain >= 1.0:
         out.append("the reflex torque aids the stretch instead of resisting it (check the "
                    "torque sign: sensors.torque_sign)")

@@ -89,3 +89,40 @@ def test_torque_sign_is_recorded_in_the_header_the_json_and_results_json(tmp_pat
     main(["estimate", str(tmp_path / "in"), "--segments", "0", "--json",
           str(tmp_path / "r.json")])
     assert json.loads((tmp_path / "r.json").read_text())[0]["options"]["torque_sign"] is None
+
+
+def test_reflex_delay_edge_names_the_option_that_widens_it(tmp_path, capsys):
+    from estimation.synthetic_reflex import parallel_cascade_trial
+    tf.write_trial(tmp_path / "late", parallel_cascade_trial("late", delay_s=0.2,
+                                                             duration_s=30.0, G=6.0))
+    args = ["estimate", str(tmp_path / "late.csv"), "--reflex", "--segments", "0"]
+    main(args)
+    out = capsys.readouterr().out
+    assert "delay_ms = 120 is at the edge of its search range 10-120: widen the range " \
+           "(e.g. --reflex-delay-ms 10 240" in out, out
+    main(args + ["--reflex-delay-ms", "10", "300"])
+    out = capsys.readouterr().out
+    delay = float(re.search(r"delay=([\d.]+)±", out).group(1))
+    assert abs(delay - 200) < 5, out
+    assert "edge of its search range" not in out
+
+
+def test_reflex_range_without_reflex_or_reversed_is_refused(tmp_path, capsys):
+    _write(tmp_path, "rec", _trial())
+    assert main(["estimate", str(tmp_path / "rec.csv"), "--reflex-delay-ms", "10", "300"]) != 0
+    assert "--reflex-delay-ms sets a search range of the reflex fit: add --reflex" in \
+        capsys.readouterr().err
+    assert main(["estimate", str(tmp_path / "rec.csv"), "--reflex", "--reflex-damping",
+                 "2", "1"]) != 0
+    assert "--reflex-damping 2 1: LO must be below HI" in capsys.readouterr().err
+
+
+def test_a_slow_recording_is_told_to_record_faster_not_to_raise_work_fs():
+    from estimation import lab
+    from estimation.synthetic_reflex import parallel_cascade_trial
+    trial = parallel_cascade_trial("slow", duration_s=60.0, fs=99.0, f_max_hz=10.0)
+    res = lab.analyse(lab.Unit("slow", [trial], "single recording"),
+                      lab.AnalysisOptions(reflex=True, nperseg=1024, segments=0,
+                                          sensitivity=False))
+    text = " ".join(res.warnings)
+    assert "record at 100 Hz or faster" in text and "work_fs" not in text, text
