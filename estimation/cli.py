@@ -183,10 +183,11 @@ def _read(sources, options, torque_sign=None):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         for s in sources:
-            got = tf.read_trials(s, min_samples=options.nperseg)
+            got = tf.read_trials(s, min_samples=2)  # the segment: _check_lengths
             for t in got:
                 t.source_arg = s
             trials += got
+    _check_lengths(trials, options)
     _unique_names(trials)
     if torque_sign is not None:
         for t in trials:
@@ -195,6 +196,33 @@ def _read(sources, options, torque_sign=None):
     for line in reader_notes(caught):
         print(line, file=sys.stderr)
     return trials
+
+
+def _check_lengths(trials, options) -> None:
+    """Refuse recordings shorter than one Welch segment (``--nperseg``), naming each and a
+    segment that works: the largest power of two giving MIN_AVERAGES (8) averages at the
+    chosen overlap (estimator.nperseg_for, as the few-averages warning suggests)."""
+    from .estimator import MIN_AVERAGES, nperseg_for
+    from .spectral import WelchOptions
+    w = options.welch()
+    short = [t for t in trials if t.n_samples < options.nperseg]
+    if not short:
+        return
+    n = min(t.n_samples for t in short)
+    frac = w["noverlap"] / w["nperseg"]
+    hint = nperseg_for(n, WelchOptions(nperseg=w["nperseg"], noverlap=w["noverlap"],
+                                       nfft=w["nfft"], window=w["window"]))
+    extra = ""
+    if options.noverlap is not None:
+        extra += f" --noverlap {int(frac * hint)}"
+    if options.nfft is not None and options.nfft < hint:
+        extra += f" --nfft {hint}"
+    names = "; ".join(f"{t.name} (from {t.source_arg}): {t.n_samples} samples, "
+                      f"{t.n_samples / t.fs:.4g} s" for t in short)
+    raise tf.TrialFormatError(
+        f"{names}: fewer than one spectral segment (--nperseg {options.nperseg}): use "
+        f"--nperseg {hint}{extra} ({MIN_AVERAGES} Welch averages of {n} samples) or "
+        f"longer recordings")
 
 
 def _declare_torque_sign(trial, sign: int) -> None:

@@ -126,3 +126,15 @@ def test_a_slow_recording_is_told_to_record_faster_not_to_raise_work_fs():
                                           sensitivity=False))
     text = " ".join(res.warnings)
     assert "record at 100 Hz or faster" in text and "work_fs" not in text, text
+
+
+def test_a_short_recording_is_told_the_nperseg_that_works(tmp_path, capsys):
+    _write(tmp_path, "fs333", _trial(fs=333.0))  # 20 s: 6660 samples
+    assert main(["estimate", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    hint = re.search(r"6660 samples, 20 s: fewer than one spectral segment \(--nperseg "
+                     r"8192\): use --nperseg (\d+)", err)
+    assert hint, err
+    assert main(["estimate", str(tmp_path), "--nperseg", hint.group(1)]) == 0
+    out = capsys.readouterr().out
+    assert "few Welch averages" not in out and "fs333: method=" in out
