@@ -810,6 +810,22 @@ def time_segments(trials, band, options) -> tuple[int, list[str]]:
     why = (f"each time segment needs a Welch segment of at least {MIN_SEGMENT_NPERSEG} "
            f"samples with {4 * MIN_BAND_BINS} frequencies in the band {band[0]:.4g}-"
            f"{band[1]:.4g} Hz")
+    nper2 = _segment_nperseg(n, 2, options.nperseg)
+    if top < 2 and nper2 >= MIN_SEGMENT_NPERSEG:  # long enough: the band is too narrow
+        df = fs / nper2
+        count = int(np.count_nonzero(band_mask(np.fft.rfftfreq(nper2, 1 / fs), band)))
+        width = (4 * MIN_BAND_BINS + 1) * df  # one bin spare: grid alignment
+        lo = max(0.0, min(band[0], band[1] - width))
+        wider = (lo, lo + width) if lo + width > band[1] else (lo, band[1])
+        cause = (f"the band {band[0]:.4g}-{band[1]:.4g} Hz is too narrow: it holds {count} "
+                 f"frequencies of a time segment's Welch grid ({nper2} samples, one every "
+                 f"{df:.3g} Hz), fewer than the {4 * MIN_BAND_BINS} the check needs; a band "
+                 f"of at least {width:.3g} Hz works (e.g. --band {wider[0]:.4g} "
+                 f"{min(wider[1], fs / 2):.4g})")
+        if asked is None:
+            return 0, [f"time-variation check not done for {names}: {cause}"]
+        if asked > top:
+            raise EstimationError(f"--segments {asked}: {cause}, or give --segments 0")
     if asked is None:
         if top >= DEFAULT_TIME_SEGMENTS:
             return DEFAULT_TIME_SEGMENTS, []
@@ -1037,10 +1053,12 @@ def fit_warnings(result: LabResult, options: AnalysisOptions) -> list[str]:
         value, ci = getattr(fit, p), getattr(fit, f"{p}_ci")
         for i in range(n):
             if value[i, i] < 0:
-                out.append(f"non-physical fit: {p}{_e(i, i, n)} = {value[i, i]:.4g} "
+                out.append(f"non-physical fit: {symbol_of(p, n)}{_e(i, i, n)} = "
+                           f"{value[i, i]:.4g} "
                            f"{UNITS[p]} is negative ({NAMES[p]})")
             elif abs(ci[i, i]) > options.ci_max_rel * abs(value[i, i]):
-                out.append(f"{p}{_e(i, i, n)} poorly determined: {value[i, i]:.4g} +- "
+                out.append(f"{symbol_of(p, n)}{_e(i, i, n)} poorly determined: "
+                           f"{value[i, i]:.4g} +- "
                            f"{ci[i, i]:.2g} {UNITS[p]}"
                            + (" (does the band reach where the inertia shows? set --band)"
                               if p == "M" else ""))

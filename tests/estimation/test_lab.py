@@ -139,7 +139,7 @@ def test_options_band_segment_window_and_corrections():
     unit = Unit("a", [trial], "")
     low = analyse(unit, AnalysisOptions(band_hz=(0.0, 3.0)))
     assert low.band_hz == (0.0, 3.0) and low.band_source == "set by the user"
-    assert any("M poorly determined" in w for w in low.warnings)
+    assert any("I poorly determined" in w for w in low.warnings)  # one joint: I
     short = analyse(unit, AnalysisOptions(nperseg=4096, noverlap=2048, window="hamming",
                                           leakage_correction="off"))
     assert short.welch["nperseg"] == 4096 and short.n_segments == 23

@@ -138,3 +138,17 @@ def test_a_short_recording_is_told_the_nperseg_that_works(tmp_path, capsys):
     assert main(["estimate", str(tmp_path), "--nperseg", hint.group(1)]) == 0
     out = capsys.readouterr().out
     assert "few Welch averages" not in out and "fs333: method=" in out
+
+
+def test_a_narrow_band_is_named_as_the_cause_and_one_joint_says_i(tmp_path, capsys):
+    _write(tmp_path, "rec", _trial())
+    main(["estimate", str(tmp_path / "rec.csv"), "--band", "399", "400"])
+    out = capsys.readouterr().out
+    assert "M poorly determined" not in out and "non-physical fit: M" not in out
+    assert re.search(r"warning: (I|K|B) poorly determined", out), out
+    assert "is too short" not in out
+    got = re.search(r"time-variation check not done for rec: the band 399-400 Hz is too "
+                    r"narrow: .*\(e\.g\. --band ([\d.]+) ([\d.]+)\)", out)
+    assert got, out
+    main(["estimate", str(tmp_path / "rec.csv"), "--band", *got.groups()])
+    assert "time-variation check not done" not in capsys.readouterr().out
