@@ -49,7 +49,10 @@ def _analysis_arguments(p, truth_default="none") -> None:
                                                  "of the segment)")
     g.add_argument("--nfft", type=number("--nfft", 2, MAX_FFT, 8192, integer=True,
                                          lo_open=False), help="FFT length [samples] (default: the segment)")
-    g.add_argument("--window", default="hann", help="Welch window (scipy.signal name)")
+    g.add_argument("--window", default="hann", type=window_name,
+                   help="Welch window, a scipy.signal.get_window name without parameters: "
+                        + ", ".join(WINDOW_EXAMPLES) + " (default hann; the leakage "
+                        "correction needs hann)")
     g.add_argument("--weighting", choices=WEIGHTINGS, default="smoothed",
                    help="bin weights of the M, B, K fit, from the data, solved once: "
                         "smoothed (1/|Z| of the neighbouring bins, relative error; "
@@ -91,6 +94,30 @@ def _analysis_arguments(p, truth_default="none") -> None:
                         + ("; auto: for the paper kind table1 (2 joints) or "
                            "reference-3dof (3 joints), else none" if truth_default == "auto"
                            else ""))
+
+
+#: Windows named in --window's help and refusal (all scipy.signal.get_window names that
+#: need no parameter; tests check each).
+WINDOW_EXAMPLES = ("hann", "hamming", "blackman", "blackmanharris", "flattop", "boxcar",
+                   "tukey")
+
+
+def window_name(text: str) -> str:
+    """argparse ``type`` of ``--window``: a name scipy.signal.get_window accepts alone;
+    otherwise an ArgumentTypeError naming valid ones (argparse adds "argument --window")."""
+    if text == "hann":  # the default: no scipy needed
+        return text
+    from scipy import signal
+    try:
+        signal.get_window(text, 16)
+    except (ValueError, TypeError) as exc:
+        needs = "must have parameters" in str(exc)
+        why = ("needs parameters, which the command line cannot pass" if needs
+               else "is not a scipy.signal window name")
+        raise argparse.ArgumentTypeError(
+            f"{text!r} {why}; use one of {', '.join(WINDOW_EXAMPLES)} (e.g. --window "
+            f"hamming)") from None
+    return text
 
 
 def register(subparsers) -> None:

@@ -103,6 +103,14 @@ class AnalysisOptions:
                                   f"least 2, got {self.segments!r}")
         if self.band_hz is not None and not 0 <= self.band_hz[0] < self.band_hz[1]:
             raise EstimationError(f"band must be 0 <= lo < hi [Hz], got {self.band_hz}")
+        if self.window != "hann":
+            from scipy import signal
+            try:
+                signal.get_window(self.window, 16)
+            except (ValueError, TypeError) as exc:
+                raise EstimationError(f"window {self.window!r}: not a window "
+                                      f"scipy.signal.get_window accepts ({exc}); e.g. "
+                                      f"'hann', 'hamming', 'blackman'") from None
         if self.nperseg < 2:
             raise EstimationError(f"--nperseg must be at least 2 samples, got {self.nperseg}")
         if self.nfft is not None and self.nfft < self.nperseg:

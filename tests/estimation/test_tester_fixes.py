@@ -152,3 +152,32 @@ def test_a_narrow_band_is_named_as_the_cause_and_one_joint_says_i(tmp_path, caps
     assert got, out
     main(["estimate", str(tmp_path / "rec.csv"), "--band", *got.groups()])
     assert "time-variation check not done" not in capsys.readouterr().out
+
+
+def test_window_refused_at_parse_time_naming_valid_ones(tmp_path, capsys):
+    from scipy import signal
+
+    from estimation.cli import WINDOW_EXAMPLES
+    for name in WINDOW_EXAMPLES:  # every name the refusal offers works
+        signal.get_window(name, 16)
+    with pytest.raises(SystemExit) as exc:  # argparse: before any file is read
+        main(["estimate", str(tmp_path / "absent"), "--window", "nonsense"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "argument --window: 'nonsense' is not a scipy.signal window name" in err
+    assert "hamming" in err and "absent" not in err
+    _write(tmp_path, "rec", _trial())
+    assert main(["estimate", str(tmp_path / "rec.csv"), "--window", "hamming",
+                 "--segments", "0"]) == 0
+
+
+@pytest.mark.parametrize("encoding,text", [("utf-16", "UTF-16 encoded (byte-order mark FF FE)"),
+                                           ("utf-16-be", "UTF-16 encoded (NUL bytes"),
+                                           ("utf-32", "UTF-32 encoded (byte-order mark FF FE 00 00)")])
+def test_a_utf16_csv_is_named_as_such(tmp_path, encoding, text):
+    src = _write(tmp_path / "a", "rec", _trial())
+    (tmp_path / "rec.csv").write_bytes(src.read_text().encode(encoding))
+    (tmp_path / "rec.json").write_text((tmp_path / "a" / "rec.json").read_text())
+    with pytest.raises(tf.TrialFormatError, match="save it as UTF-8") as exc:
+        tf.read_trial(tmp_path / "rec.csv")
+    assert text in str(exc.value) and "missing" not in str(exc.value)
