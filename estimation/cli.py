@@ -23,6 +23,11 @@ from trialformat.cliargs import MAX_FFT, number
 from .names import METHODS, PAPER, RECOMMENDED, WEIGHTINGS
 
 TRUTHS = ("none", "table1", "reference-3dof")
+#: --reflex-* search ranges: option, ReflexOptions field, unit, largest value, default
+#: (estimation.reflex.ReflexOptions; kept here so that --help loads no numpy), example
+REFLEX_RANGES = (("--reflex-delay-ms", "delay_ms", "ms", 1000.0, (10.0, 120.0), "10 250"),
+                 ("--reflex-cutoff-hz", "cutoff_hz", "Hz", 1000.0, (0.5, 20.0), "0.5 40"),
+                 ("--reflex-damping", "damping", "-", 100.0, (0.3, 2.0), "0.2 3"))
 
 
 def _analysis_arguments(p, truth_default="none") -> None:
@@ -44,7 +49,10 @@ def _analysis_arguments(p, truth_default="none") -> None:
                                                  "of the segment)")
     g.add_argument("--nfft", type=number("--nfft", 2, MAX_FFT, 8192, integer=True,
                                          lo_open=False), help="FFT length [samples] (default: the segment)")
-    g.add_argument("--window", default="hann", help="Welch window (scipy.signal name)")
+    g.add_argument("--window", default="hann", type=window_name,
+                   help="Welch window, a scipy.signal.get_window name without parameters: "
+                        + ", ".join(WINDOW_EXAMPLES) + " (default hann; the leakage "
+                        "correction needs hann)")
     g.add_argument("--weighting", choices=WEIGHTINGS, default="smoothed",
                    help="bin weights of the M, B, K fit, from the data, solved once: "
                         "smoothed (1/|Z| of the neighbouring bins, relative error; "
@@ -67,6 +75,11 @@ def _analysis_arguments(p, truth_default="none") -> None:
                    help="also fit intrinsic K, B, I + a reflex pathway (delayed velocity, "
                         "half-wave rectified, 2nd-order low-pass) to each one-joint trial "
                         "in the time domain (estimation.reflex; docs/estimation.md)")
+    for opt, attr, unit, hi, default, ex in REFLEX_RANGES:
+        g.add_argument(opt, nargs=2, metavar=("LO", "HI"), default=None,
+                       type=number(opt, 0, hi, ex, unit=unit),
+                       help=f"with --reflex: search range of the reflex {attr} [{unit}] "
+                            f"(default {default[0]:g} {default[1]:g})")
     g.add_argument("--torque-sign", type=int, choices=(1, -1), default=None,
                    help="-1: the recordings' torque has the opposite sign to the angle's "
                         "convention (as metadata sensors.torque_sign, which it overrides: "
@@ -81,6 +94,30 @@ def _analysis_arguments(p, truth_default="none") -> None:
                         + ("; auto: for the paper kind table1 (2 joints) or "
                            "reference-3dof (3 joints), else none" if truth_default == "auto"
                            else ""))
+
+
+#: Windows named in --window's help and refusal (all scipy.signal.get_window names that
+#: need no parameter; tests check each).
+WINDOW_EXAMPLES = ("hann", "hamming", "blackman", "blackmanharris", "flattop", "boxcar",
+                   "tukey")
+
+
+def window_name(text: str) -> str:
+    """argparse ``type`` of ``--window``: a name scipy.signal.get_window accepts alone;
+    otherwise an ArgumentTypeError naming valid ones (argparse adds "argument --window")."""
+    if text == "hann":  # the default: no scipy needed
+        return text
+    from scipy import signal
+    try:
+        signal.get_window(text, 16)
+    except (ValueError, TypeError) as exc:
+        needs = "must have parameters" in str(exc)
+        why = ("needs parameters, which the command line cannot pass" if needs
+               else "is not a scipy.signal window name")
+        raise argparse.ArgumentTypeError(
+            f"{text!r} {why}; use one of {', '.join(WINDOW_EXAMPLES)} (e.g. --window "
+            f"hamming)") from None
+    return text
 
 
 def register(subparsers) -> None:
@@ -110,6 +147,32 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_figures)
 
 
+def _reflex_options(args):
+    """``--reflex`` and its ``--reflex-*`` ranges: False, True (the defaults) or a
+    ReflexOptions. A range without --reflex, or LO >= HI, is refused naming the option."""
+    given = {attr: tuple(getattr(args, attr_of(opt)))
+             for opt, attr, *_ in REFLEX_RANGES if getattr(args, attr_of(opt), None)}
+    reflex = getattr(args, "reflex", False)
+    for opt, attr, *_, ex in REFLEX_RANGES:
+        if attr in given:
+            lo, hi = given[attr]
+            if not reflex:
+                raise ValueError(f"{opt} sets a search range of the reflex fit: add --reflex")
+            if not lo < hi:
+                raise ValueError(f"{opt} {lo:g} {hi:g}: LO must be below HI (e.g. {opt} {ex})")
+    if not (reflex and given):
+        return reflex
+    from .reflex import ReflexOptions
+    opts = ReflexOptions(**given)
+    opts.check()
+    return opts
+
+
+def attr_of(option: str) -> str:
+    """argparse's attribute name of ``option``."""
+    return option.lstrip("-").replace("-", "_")
+
+
 def options_from(args):
     from .lab import AnalysisOptions
     options = AnalysisOptions(
@@ -118,7 +181,7 @@ def options_from(args):
         sampling_correction="off" if args.raw else args.sampling_correction,
         leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool,
         weighting=args.weighting, segments=args.segments,
-        reflex=getattr(args, "reflex", False))
+        reflex=_reflex_options(args))
     options.check()
     return options
 
@@ -147,10 +210,11 @@ def _read(sources, options, torque_sign=None):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         for s in sources:
-            got = tf.read_trials(s, min_samples=options.nperseg)
+            got = tf.read_trials(s, min_samples=2)  # the segment: _check_lengths
             for t in got:
                 t.source_arg = s
             trials += got
+    _check_lengths(trials, options)
     _unique_names(trials)
     if torque_sign is not None:
         for t in trials:
@@ -159,6 +223,33 @@ def _read(sources, options, torque_sign=None):
     for line in reader_notes(caught):
         print(line, file=sys.stderr)
     return trials
+
+
+def _check_lengths(trials, options) -> None:
+    """Refuse recordings shorter than one Welch segment (``--nperseg``), naming each and a
+    segment that works: the largest power of two giving MIN_AVERAGES (8) averages at the
+    chosen overlap (estimator.nperseg_for, as the few-averages warning suggests)."""
+    from .estimator import MIN_AVERAGES, nperseg_for
+    from .spectral import WelchOptions
+    w = options.welch()
+    short = [t for t in trials if t.n_samples < options.nperseg]
+    if not short:
+        return
+    n = min(t.n_samples for t in short)
+    frac = w["noverlap"] / w["nperseg"]
+    hint = nperseg_for(n, WelchOptions(nperseg=w["nperseg"], noverlap=w["noverlap"],
+                                       nfft=w["nfft"], window=w["window"]))
+    extra = ""
+    if options.noverlap is not None:
+        extra += f" --noverlap {int(frac * hint)}"
+    if options.nfft is not None and options.nfft < hint:
+        extra += f" --nfft {hint}"
+    names = "; ".join(f"{t.name} (from {t.source_arg}): {t.n_samples} samples, "
+                      f"{t.n_samples / t.fs:.4g} s" for t in short)
+    raise tf.TrialFormatError(
+        f"{names}: fewer than one spectral segment (--nperseg {options.nperseg}): use "
+        f"--nperseg {hint}{extra} ({MIN_AVERAGES} Welch averages of {n} samples) or "
+        f"longer recordings")
 
 
 def _declare_torque_sign(trial, sign: int) -> None:
@@ -212,8 +303,9 @@ def _report_failures(failures, results) -> int:
             raise EstimationError(failures[0][1])
         raise EstimationError("no condition could be estimated: " + "; ".join(
             f"{label}: {message}" for label, message in failures))
-    for label, message in failures:
-        print(f"error: {label}: {message}", file=sys.stderr)
+    for label, message in failures:  # a message naming its recording is not prefixed
+        prefix = "" if message.startswith(f"{label}: ") else f"{label}: "
+        print(f"error: {prefix}{message}", file=sys.stderr)
     return 1 if failures else 0
 
 
@@ -226,15 +318,28 @@ def run_estimate(args) -> int:
     results = lab_results(trials, options, args.truth, failures)
     status = _report_failures(failures, results)
     for r in results:
-        print(describe(r))
+        print(describe(r, args.torque_sign))
     _reflex_note(results)
     if args.json:
-        doc = [{**r.to_json(), "condition": r.label,
+        recorded = recorded_options(options, args)
+        doc = [{**r.to_json(), "condition": r.label, "options": recorded,
                 "compensated": r.corrections["left_limit_sampling"],
                 "leakage_removed": r.corrections["window_leakage"]} for r in results]
         args.json.parent.mkdir(parents=True, exist_ok=True)
         tf.atomic_write(args.json, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
     return status if results else 1
+
+
+def recorded_options(options, args) -> dict:
+    """The analysis options as recorded in ``results.json`` and ``--json``: the
+    AnalysisOptions fields and ``torque_sign`` (``--torque-sign``: +-1, or None when the
+    metadata's ``sensors.torque_sign`` was used)."""
+    from dataclasses import asdict, is_dataclass
+    out = dict(options.__dict__)
+    if is_dataclass(out.get("reflex")):
+        out["reflex"] = asdict(out["reflex"])
+    out["torque_sign"] = args.torque_sign
+    return out
 
 
 def _check_json_out(path: Path) -> None:
@@ -261,15 +366,18 @@ def _check_json_out(path: Path) -> None:
                                  f"of 'estimate --json' (a trial, its metadata or another "
                                  f"file would be replaced); give a new file name")
 
-def describe(r) -> str:
-    """Text of one result: set-up line, one line per element, the warnings."""
+def describe(r, torque_sign=None) -> str:
+    """Text of one result: set-up line, one line per element, the warnings.
+    ``torque_sign`` (``--torque-sign``, +-1) is said in the set-up line when given."""
     from .lab import UNITS, WEIGHTING_TEXT, element_indices, symbol_of as symbol
     c = r.corrections
+    sign = ("" if torque_sign is None else
+            f"; torque sign {torque_sign:+d} (--torque-sign, over the metadata)")
     lines = [f"{r.label}: method={r.method}, trials={', '.join(r.trials)} ({r.reason}); "
              f"band {r.band_hz[0]:g}-{r.band_hz[1]:g} Hz ({r.band_source}), "
              f"{r.n_segments} segments; "
              f"sampling correction {'on' if c['left_limit_sampling'] else 'off'}, "
-             f"leakage correction {'on' if c['window_leakage'] else 'off'}",
+             f"leakage correction {'on' if c['window_leakage'] else 'off'}{sign}",
              f"  fit: {WEIGHTING_TEXT[r.weighting]} ({r.weighting})"]
     conf = int(round(100 * r.fit.confidence))
     for i, k in element_indices(r.n_dof):
@@ -351,9 +459,9 @@ def run_figures(args) -> int:
         results = lab_results(trials, options, truth, failures)
         status = _report_failures(failures, results)
         files = write_lab_report(results, args.out, options={
-            **options.__dict__, "truth": truth})
+            **recorded_options(options, args), "truth": truth})
         for r in results:
-            print(describe(r))
+            print(describe(r, args.torque_sign))
         _reflex_note(results)
     for f in files:
         print(f)

@@ -103,6 +103,14 @@ class AnalysisOptions:
                                   f"least 2, got {self.segments!r}")
         if self.band_hz is not None and not 0 <= self.band_hz[0] < self.band_hz[1]:
             raise EstimationError(f"band must be 0 <= lo < hi [Hz], got {self.band_hz}")
+        if self.window != "hann":
+            from scipy import signal
+            try:
+                signal.get_window(self.window, 16)
+            except (ValueError, TypeError) as exc:
+                raise EstimationError(f"window {self.window!r}: not a window "
+                                      f"scipy.signal.get_window accepts ({exc}); e.g. "
+                                      f"'hann', 'hamming', 'blackman'") from None
         if self.nperseg < 2:
             raise EstimationError(f"--nperseg must be at least 2 samples, got {self.nperseg}")
         if self.nfft is not None and self.nfft < self.nperseg:
@@ -414,6 +422,7 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
     trials = unit.trials
     method = default_method(trials) if options.method == "auto" else options.method
     usable = _usable(trials, method)
+    check_not_constant(usable, method)
     fs = usable[0].fs
     welch = options.welch()
     whole = estimate_impedance(usable, method=method, band_hz=(0.0, fs / 2),
@@ -472,6 +481,45 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
                             f"{s['reason'].removeprefix('reflex fit: ')}"
                             for s in result.reflex_not_fitted if s["kind"] != "joints"]
     return result
+
+
+#: A signal whose peak-to-peak range is at most this fraction of its largest magnitude
+#: (or exactly 0) is constant to the estimate: after the mean is removed nothing but
+#: rounding is left (0.1 + 1e-12 n over 60000 samples: 6e-7).
+CONSTANT_REL = 1e-6
+_SIGNAL_UNITS = {"theta": "rad", "theta_ref": "rad", "tau_h": "N m", "tau_delta": "N m"}
+
+
+def check_not_constant(trials, method) -> None:
+    """Refuse a set whose estimate would divide by a zero spectrum: a constant (or
+    numerically constant, :data:`CONSTANT_REL`) ``theta``, ``tau_h`` or perturbation
+    (``theta_ref``/``tau_delta``, not for ``direct``) of a perturbed joint (every joint
+    of an all-joints trial). EstimationError ``"[NAME: ]tau_h[1] is constant (1.5 N m):
+    nothing to estimate"``."""
+    for t in trials:
+        names = ["theta", "tau_h"]
+        if method != "direct":
+            names.append("theta_ref" if t.perturbation_kind == "position" else "tau_delta")
+        joints = range(t.n_dof) if t.perturbed_dof is None else [t.perturbed_dof - 1]
+        for name in names:
+            x = getattr(t, name)
+            if x is None:
+                continue
+            for j in joints:
+                col = np.asarray(x[:, j], dtype=float)
+                if not np.all(np.isfinite(col)):
+                    continue
+                ptp = float(np.ptp(col))
+                if ptp <= CONSTANT_REL * float(np.max(np.abs(col))):
+                    value = (f"{col[0]:.6g}" if ptp == 0 else
+                             f"{col.mean():.6g}, range {ptp:.2g}") + f" {_SIGNAL_UNITS[name]}"
+                    if name == "tau_h" and (t.meta.get("sensors") or {}).get(
+                            "torque_sign", 1) == -1:
+                        value += " as read, sensors.torque_sign -1 applied"
+                    raise EstimationError(
+                        f"{t.name}: {name}[{j + 1}] is {'constant' if ptp == 0 else 'numerically constant'} "
+                        f"({value}): nothing to estimate (check the "
+                        f"column holds the recorded signal)")
 
 
 def few_segments_warning(trials, result) -> list[str]:
@@ -770,6 +818,22 @@ def time_segments(trials, band, options) -> tuple[int, list[str]]:
     why = (f"each time segment needs a Welch segment of at least {MIN_SEGMENT_NPERSEG} "
            f"samples with {4 * MIN_BAND_BINS} frequencies in the band {band[0]:.4g}-"
            f"{band[1]:.4g} Hz")
+    nper2 = _segment_nperseg(n, 2, options.nperseg)
+    if top < 2 and nper2 >= MIN_SEGMENT_NPERSEG:  # long enough: the band is too narrow
+        df = fs / nper2
+        count = int(np.count_nonzero(band_mask(np.fft.rfftfreq(nper2, 1 / fs), band)))
+        width = (4 * MIN_BAND_BINS + 1) * df  # one bin spare: grid alignment
+        lo = max(0.0, min(band[0], band[1] - width))
+        wider = (lo, lo + width) if lo + width > band[1] else (lo, band[1])
+        cause = (f"the band {band[0]:.4g}-{band[1]:.4g} Hz is too narrow: it holds {count} "
+                 f"frequencies of a time segment's Welch grid ({nper2} samples, one every "
+                 f"{df:.3g} Hz), fewer than the {4 * MIN_BAND_BINS} the check needs; a band "
+                 f"of at least {width:.3g} Hz works (e.g. --band {wider[0]:.4g} "
+                 f"{min(wider[1], fs / 2):.4g})")
+        if asked is None:
+            return 0, [f"time-variation check not done for {names}: {cause}"]
+        if asked > top:
+            raise EstimationError(f"--segments {asked}: {cause}, or give --segments 0")
     if asked is None:
         if top >= DEFAULT_TIME_SEGMENTS:
             return DEFAULT_TIME_SEGMENTS, []
@@ -865,6 +929,10 @@ SIGN_PHASE_DEG = 135.0
 #: Mean angle beyond this many standard deviations (and ABSOLUTE_MIN_RAD) reads as
 #: absolute angles logged as deviations.
 ABSOLUTE_SIGMAS, ABSOLUTE_MIN_RAD = 3.0, 0.02
+#: Angles in degrees: a deviation from the mean angle beyond DEGREES_LIMIT_RAD (no joint's
+#: perturbation moves it 2 rad, 115 deg) that is a plausible one (< DEGREES_PLAUSIBLE_RAD)
+#: read as degrees. The rule of the diagnosis' conventions check (diagnosis/conventions.py).
+DEGREES_LIMIT_RAD, DEGREES_PLAUSIBLE_RAD = 2.0, 0.5
 
 
 def convention_warnings(result, trials) -> list[str]:
@@ -876,6 +944,10 @@ def convention_warnings(result, trials) -> list[str]:
       0 deg at low frequency. Key: ``sensors.torque_sign``.
     - ``absolute angles?``: a joint's mean angle beyond ABSOLUTE_SIGMAS standard
       deviations and ABSOLUTE_MIN_RAD while the file declares deviations. Key: ``angles``.
+    - ``angles in degrees?``: a joint's largest deviation from its mean angle beyond
+      DEGREES_LIMIT_RAD (2 rad) while the same number read as degrees is below
+      DEGREES_PLAUSIBLE_RAD (0.5 rad). No key declares degrees: theta must be stored in
+      rad (log-format.md); K, B, I scale by 180/pi once it is.
     """
     out, n = [], result.n_dof
     fit = result.fit
@@ -899,12 +971,31 @@ def convention_warnings(result, trials) -> list[str]:
                        f"\"sensors\": {{\"torque_sign\": {want}}} in the metadata or "
                        f"the .mat's sidecar NAME.json (now {now}), or give --torque-sign "
                        f"{want if len(signs) == 1 else -1}; the reader then negates tau_h")
+    degrees = set()
+    for t in trials:
+        if t.theta is None:
+            continue
+        dev = np.max(np.abs(t.theta - t.theta.mean(axis=0)), axis=0)
+        for j in range(t.n_dof):
+            if DEGREES_LIMIT_RAD < dev[j] and np.radians(dev[j]) < DEGREES_PLAUSIBLE_RAD:
+                degrees.add((t.name, j))
+                k = fit.K[j, j] * 180 / np.pi
+                out.append(f"angles in degrees? {t.name}: theta[{j + 1}] deviates up to "
+                           f"{dev[j]:.4g} rad from its mean (std {t.theta[:, j].std():.3g} "
+                           f"rad), beyond the {DEGREES_LIMIT_RAD:g} rad a joint's "
+                           f"perturbation can move it; read as degrees it is "
+                           f"{np.radians(dev[j]):.3g} rad. theta must be in rad "
+                           f"(log-format.md; no metadata key declares degrees): store "
+                           f"theta[{j + 1}] * pi/180; K, B, {symbol_of('M', n)} are then "
+                           f"180/pi = 57.3 times these (K{_e(j, j, n)} about {k:.4g} "
+                           f"{UNITS['K']})")
     for t in trials:
         if t.meta.get("angles") == "absolute" or t.theta is None:
             continue
         m, sd = t.theta.mean(axis=0), t.theta.std(axis=0)
         for j in range(t.n_dof):
-            if abs(m[j]) > max(ABSOLUTE_SIGMAS * sd[j], ABSOLUTE_MIN_RAD):
+            if (t.name, j) not in degrees and abs(m[j]) > max(ABSOLUTE_SIGMAS * sd[j],
+                                                              ABSOLUTE_MIN_RAD):
                 out.append(f"absolute angles? {t.name}: theta[{j + 1}] has mean "
                            f"{m[j]:.4g} rad ({np.degrees(m[j]):.3g} deg), "
                            f"{abs(m[j]) / sd[j]:.1f} times its standard deviation, while "

@@ -229,8 +229,11 @@ def _prepare(theta, tau, fs, options) -> _Work:
         raise ReflexNotApplicable(f"reflex fit: lowpass_hz {options.lowpass_hz:g} Hz too close "
                                   f"to the working Nyquist frequency {fw / 2:g} Hz (the "
                                   f"recording is sampled at {fs:g} Hz; at least "
-                                  f"{2 * options.lowpass_hz / 0.8:g} Hz needed); raise work_fs",
-                                  kind="rate")
+                                  f"{2 * options.lowpass_hz / 0.8:g} Hz needed): "
+                                  + (f"record at {2 * options.lowpass_hz / 0.8:g} Hz or "
+                                     f"faster" if q == 1 else
+                                     f"raise ReflexOptions.work_fs (now {options.work_fs:g}"
+                                     f" Hz)"), kind="rate")
     sos = signal.butter(4, options.lowpass_hz, fs=fs, output="sos")
     th = signal.sosfiltfilt(sos, theta)[::q]
     tq = signal.sosfiltfilt(sos, tau)[::q]
@@ -567,8 +570,13 @@ def reflex_warnings(r: ReflexResult, options: ReflexOptions) -> list:
                        f"no reflex identified in {rng[0]:g}-{rng[1]:g} ms")
         elif np.isclose(r.values[p], rng[0], rtol=1e-3) or np.isclose(r.values[p], rng[1],
                                                                       rtol=1e-3):
-            out.append(f"{p} = {r.values[p]:.4g} is at the edge of its search range {rng}: "
-                       f"widen the range")
+            opt = "--reflex-" + {"delay_ms": "delay-ms", "cutoff_hz": "cutoff-hz",
+                                 "damping": "damping"}[p]
+            lo, hi = rng
+            wider = (lo / 2, hi) if np.isclose(r.values[p], lo, rtol=1e-3) else (lo, 2 * hi)
+            out.append(f"{p} = {r.values[p]:.4g} is at the edge of its search range "
+                       f"{lo:g}-{hi:g}: widen the range (e.g. {opt} {wider[0]:g} "
+                       f"{wider[1]:g}; ReflexOptions.{p} in the API)")
     if not r.resists_stretch and gain >= 1.0:
         out.append("the reflex torque aids the stretch instead of resisting it (check the "
                    "torque sign: sensors.torque_sign)")
@@ -581,11 +589,17 @@ def reflex_warnings(r: ReflexResult, options: ReflexOptions) -> list:
 def fit_reflex_trial(trial, options: ReflexOptions | None = None) -> ReflexResult:
     """:func:`fit_reflex` on a one-joint trialformat.Trial (its ``theta`` and ``tau_h``).
 
-    Raises EstimationError for a trial of several joints.
+    Raises ReflexNotApplicable for a trial of several joints (kind ``"joints"``) or a
+    constant ``theta`` or ``tau_h`` (kind ``"constant"``: estimation.lab.check_not_constant).
     """
     if trial.n_dof != 1:
         raise ReflexNotApplicable(f"the reflex model is for one joint; trial {trial.name!r} "
                                   f"has {trial.n_dof} joints", kind="joints")
+    from .lab import check_not_constant
+    try:
+        check_not_constant([trial], "direct")
+    except EstimationError as exc:
+        raise ReflexNotApplicable(f"reflex fit: {exc}", kind="constant") from None
     return fit_reflex(trial.theta[:, 0], trial.tau_h[:, 0], trial.fs, options,
                       name=trial.name, joint=1)
 
@@ -607,7 +621,9 @@ def reflex_of_trials(trials, options=True) -> tuple[list, list]:
     for each other one, ``{"trial", "reason", "kind"}`` with ``kind`` ``"joints"`` (a
     trial of several joints: the model is for one), ``"short"`` (fewer samples than
     :func:`minimum_samples`; the reason names the minimum) or ``"rate"`` (sampled too
-    slowly for the fit's low-pass). Other errors (bad options, non-finite data) raise."""
+    slowly for the fit's low-pass), ``"constant"`` (a constant angle or torque) or
+    ``"singular"`` (linearly dependent regressors: a
+    constant angle). Other errors (bad options, non-finite data) raise."""
     opts = options if isinstance(options, ReflexOptions) else ReflexOptions()
     opts.check()
     fitted, skipped = [], []
@@ -621,6 +637,11 @@ def reflex_of_trials(trials, options=True) -> tuple[list, list]:
             fitted.append(fit_reflex_trial(t, opts))
         except ReflexNotApplicable as exc:
             skipped.append({"trial": t.name, "kind": exc.kind, "reason": str(exc)})
+        except np.linalg.LinAlgError as exc:  # a constant or degenerate angle or torque
+            skipped.append({"trial": t.name, "kind": "singular", "reason": (
+                f"reflex fit: the regressors of {t.name!r} (angle, velocity, acceleration, "
+                f"delayed velocity) are linearly dependent ({exc}): is an angle or torque "
+                f"column constant?")})
     return fitted, skipped
 
 

@@ -3,7 +3,9 @@
 Accepted as RFC 4180 defines CSV: quoted header names and fields, CRLF or LF line ends, a
 UTF-8 byte-order mark, ``,`` ``;`` or tab as the field separator (``.`` decimal mark), and
 extra columns of any content (text, blank or NaN cells), which are returned only when
-numeric; their text may be in any encoding (Latin-1, cp1252: never decoded). The fast
+numeric; their text may be in any encoding (Latin-1, cp1252: never decoded). A file in
+UTF-16 or UTF-32 (byte-order mark, or NUL-interleaved header) is refused naming the
+encoding ("save it as UTF-8"). The fast
 path is one ``pyarrow.csv.read_csv`` call; when it fails, the file is
 re-read with the standard ``csv`` module only to name the 1-based data row and the column
 at fault.
@@ -46,6 +48,36 @@ def printable(text: str) -> str:
                    for c in text)
 
 
+#: Byte-order marks of the encodings a CSV trial cannot be in (longest first: UTF-32 LE
+#: starts with UTF-16 LE's mark).
+WIDE_BOMS = ((b"\xff\xfe\x00\x00", "UTF-32"), (b"\x00\x00\xfe\xff", "UTF-32"),
+             (b"\xff\xfe", "UTF-16"), (b"\xfe\xff", "UTF-16"))
+
+
+def _refuse_wide_encoding(path: Path) -> None:
+    """Refuse a file in UTF-16 or UTF-32 (a byte-order mark, or NUL bytes making more than
+    30 % of its first line: NUL-interleaved ASCII, 50 % in UTF-16 and 75 % in UTF-32),
+    naming the encoding and the fix (save as UTF-8)."""
+    try:
+        opener = gzip.open if str(path).lower().endswith(".gz") else open
+        with opener(path, "rb") as fh:
+            head = fh.read(4096)
+    except (OSError, EOFError):
+        return  # read_header says what is wrong
+    match = next(((bom, name) for bom, name in WIDE_BOMS if head.startswith(bom)), None)
+    if match is not None:
+        found, why = match[1], "byte-order mark " + " ".join(f"{c:02X}" for c in match[0])
+    else:
+        line = head.split(b"\n", 1)[0]
+        zeros = line.count(b"\x00") / max(len(line), 1)
+        if zeros <= 0.3:  # none, or a stray NUL: the header check names the columns
+            return
+        found = "UTF-32" if zeros > 0.6 else "UTF-16"
+        why = "NUL bytes between the header's characters"
+    raise TrialFormatError(f"{path}: looks {found} encoded ({why}); save it as UTF-8 "
+                           f"(e.g. Excel: 'CSV UTF-8'; iconv -f {found} -t UTF-8)")
+
+
 def read_header(path: Path) -> tuple[list[str], str]:
     """Header names (quotes, BOM and surrounding blanks removed) and the field separator.
 
@@ -58,6 +90,7 @@ def read_header(path: Path) -> tuple[list[str], str]:
         Empty file, a first line longer than :data:`MAX_HEADER_CHARS`, or a file that is
         not gzip although its name ends in ``.gz``.
     """
+    _refuse_wide_encoding(path)
     # undecodable bytes can only be in extra names (declared ones are ASCII): replaced
     try:
         with open_text(path) as fh:
