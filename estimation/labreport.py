@@ -61,7 +61,7 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
             stem = safe_name(r.label)
             names += write_frf(r, tmp / f"frf_{stem}")
             names.append(_save(bode(r), tmp / f"bode_{stem}.png"))
-        names += write_parameters(results, tmp)
+        names += write_parameters(results, tmp, torque_sign=(options or {}).get("torque_sign"))
         if any(getattr(r, "reflex", None) for r in results):
             from .reflex import write_reflex_tables
             names += write_reflex_tables(results, tmp)
@@ -100,12 +100,16 @@ def _unit(column: str) -> str:
     return FRF_UNITS[column.split("_", 1)[1]]
 
 
-def write_parameters(results, folder: Path) -> list[Path]:
+def write_parameters(results, folder: Path, *, torque_sign=None) -> list[Path]:
     """``parameters.csv`` and ``parameters.md``: the second-order fit of every result and,
     where the reflex fit was asked, one row (and a table) per fitted trial of the
-    intrinsic + reflex model (column ``model``; its VAFs in ``VAF_*`` columns)."""
+    intrinsic + reflex model (column ``model``; its VAFs in ``VAF_*`` columns).
+    ``torque_sign`` (``--torque-sign``, or None) is stated at the top of parameters.md."""
     rows = result_rows(results)
-    md = [parameters_markdown(results)]
+    md = [] if torque_sign is None else [
+        f"Torque sign {torque_sign:+d} given on the command line (--torque-sign), over what "
+        f"the recordings' metadata declare.\n"]
+    md.append(parameters_markdown(results))
     if any(getattr(r, "reflex", None) is not None for r in results):
         from .reflex import reflex_markdown, reflex_parameter_rows
         for row in rows:

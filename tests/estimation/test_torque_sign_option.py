@@ -29,3 +29,14 @@ def test_the_warning_names_the_option_and_the_option_gives_the_physical_answer(t
     assert "torque sign reversed?" not in printed, printed
     k, ci = (float(v) for v in re.search(r"K=([-\d.]+)±([\d.]+)", printed).groups())
     assert abs(k - ANKLE["K"]) < ci, (k, ci)  # the true K inside its 95 % interval
+
+
+def test_the_lab_report_states_the_sign_given_on_the_command_line(tmp_path):
+    _write(tmp_path)
+    out = tmp_path / "report"
+    assert main(["figures", str(tmp_path / "rec.csv"), "--out", str(out),
+                 "--torque-sign", "-1"]) == 0
+    assert "--torque-sign" in (out / "parameters.md").read_text().splitlines()[0]
+    plain = tmp_path / "plain"
+    assert main(["figures", str(tmp_path / "rec.csv"), "--out", str(plain)]) == 0
+    assert "--torque-sign" not in (plain / "parameters.md").read_text()
