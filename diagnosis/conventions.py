@@ -27,11 +27,12 @@ import math
 
 import numpy as np
 
+# deviations are at most ANGLE_LIMIT_RAD in any trial the master runs; one read as degrees
+# is plausible below PLAUSIBLE_DEVIATION_RAD
+from trialformat.reference import ANGLE_LIMIT_RAD, PLAUSIBLE_DEVIATION_RAD
+
 from .storage import detect_storage
 
-#: deviations are at most this in any trial the master runs (orchestrator ANGLE_LIMIT_RAD)
-ANGLE_LIMIT_RAD = 2.0
-PLAUSIBLE_DEVIATION_RAD = 0.5
 ABSOLUTE_TOLERANCE_RAD = 0.05
 
 

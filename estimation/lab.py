@@ -26,6 +26,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from trialformat.reference import ANGLE_LIMIT_RAD, PLAUSIBLE_DEVIATION_RAD
+
 from .accuracy import (WEIGHTINGS, corrected_impedance, fit_impedance, left_limit_delay,
                        true_impedance, vaf)
 from .conditions import condition_of
@@ -931,8 +933,9 @@ SIGN_PHASE_DEG = 135.0
 ABSOLUTE_SIGMAS, ABSOLUTE_MIN_RAD = 3.0, 0.02
 #: Angles in degrees: a deviation from the mean angle beyond DEGREES_LIMIT_RAD (no joint's
 #: perturbation moves it 2 rad, 115 deg) that is a plausible one (< DEGREES_PLAUSIBLE_RAD)
-#: read as degrees. The rule of the diagnosis' conventions check (diagnosis/conventions.py).
-DEGREES_LIMIT_RAD, DEGREES_PLAUSIBLE_RAD = 2.0, 0.5
+#: read as degrees. The rule of the diagnosis' conventions check, on the same constants
+#: (trialformat.reference).
+DEGREES_LIMIT_RAD, DEGREES_PLAUSIBLE_RAD = ANGLE_LIMIT_RAD, PLAUSIBLE_DEVIATION_RAD
 
 
 def convention_warnings(result, trials) -> list[str]:

@@ -11,11 +11,13 @@ import math
 
 import numpy as np
 
+# a closed loop whose joint angle deviation leaves +-ANGLE_LIMIT_RAD has diverged (one
+# value with the readers' "angles in degrees?" checks)
+from trialformat.reference import ANGLE_LIMIT_RAD
+
 from .errors import DivergenceError, FMUCallError, RateError
 from .plant import step_error
 
-#: A closed loop whose joint angle deviation leaves this range [rad].
-ANGLE_LIMIT_RAD = 2.0
 
 
 def decimation(control_period: float, communication_step: float | None) -> int:

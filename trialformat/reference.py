@@ -14,6 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
+#: Largest deviation of a joint angle from its posture in any trial [rad]: the master
+#: stops a closed loop beyond it (diverged), and a recorded deviation beyond it reads as
+#: angles stored in degrees (no joint's perturbation moves it 115 deg).
+ANGLE_LIMIT_RAD = 2.0
+#: A deviation read as degrees is a plausible perturbation below this [rad].
+PLAUSIBLE_DEVIATION_RAD = 0.5
+
 REFERENCE_PATH = Path(__file__).with_name("reference.json")
 #: The reference configurations by name: the paper's two joints (docs/spec/reference.md)
 #: and shoulder-elbow-wrist (docs/spec/reference-3dof.md), same keys.
