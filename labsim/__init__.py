@@ -29,7 +29,7 @@ API (stable; docs/labsim.md)::
 
 from .draw import KINDS, draw
 from .servo import SimulationError
-from .simulate import Recording, simulate
+from .recording import Recording, simulate
 from .spec import (Channel, Filter, Footplate, Limb, Movement, Perturbation, RecordingSpec,
                    Reflex, Sensors, Servo, Variation, Voluntary, WobblingMass,
                    spec_from_dict, spec_to_dict)

@@ -41,7 +41,7 @@ KINDS = ("nominal", "nominal_coloured_noise", "voluntary", "footplate_friction",
          "reflex_other_damping", "wobbling_other_damping", "antialias_filter",
          "linear_drift", "saturating_drift", "switching", "modulated",
          "moving_angle_dependent", "moving_linear", "channel_delay", "rest_period",
-         "stiffening_spring", "short_range_stiffness")
+         "stiffening_spring", "short_range_stiffness", "backlash", "contact_clipping")
 
 
 def _u(rng, lo, hi):
@@ -155,6 +155,7 @@ def draw(kind: str, rng: np.random.Generator, *, n_dof: int = 1, reflex: bool | 
     limb = _limb(rng, n_dof)
     pert = _perturbation(rng, n_dof, f_top)
     if n_dof == 2:
+        pert.amplitude_rad *= 0.5  # the arm: 5-15 mrad (Perreault et al. 2001)
         pert.joints = [1, 2] if rng.uniform() < 0.5 else [int(rng.integers(1, 3))]
     servo = Servo(kind="pd", f_hz=_u(rng, 50, 120) if n_dof == 1 else _u(rng, 30, 60),
                   damping=_u(rng, 0.6, 1.0),
@@ -169,11 +170,11 @@ def draw(kind: str, rng: np.random.Generator, *, n_dof: int = 1, reflex: bool | 
                          sensors=_sensors(rng, tau_rms, base == "nominal_coloured_noise"))
     if with_reflex:
         spec.reflex = _reflex(rng, n_dof, base == "reflex_other_damping")
-    _apply_kind(spec, base, rng, n_dof, I1)
+    _apply_kind(spec, base, rng, n_dof, I1, tau_rms)
     return spec
 
 
-def _apply_kind(spec, base, rng, n_dof, I1):
+def _apply_kind(spec, base, rng, n_dof, I1, tau_rms):
     limb = spec.limb
     if base == "voluntary":
         spec.voluntary = Voluntary(fraction=_u(rng, 0.1, 0.5), band_hz=_u(rng, 1.0, 2.0))
@@ -230,3 +231,9 @@ def _apply_kind(spec, base, rng, n_dof, I1):
         spec.footplate = Footplate(backlash_rad=_u(rng, 0.05, 0.2) *
                                    spec.perturbation.amplitude_rad,
                                    contact_hz=_u(rng, 100, 200))
+    elif base == "contact_clipping":
+        # the subject pushes (background torque) and the contact slips beyond a limit
+        # reached by the larger perturbation torques of the opposite sign
+        bg = _u(rng, 2.0, 8.0)
+        limb.background_torque_nm = bg if n_dof == 1 else [bg, 0.0]
+        spec.footplate = Footplate(contact_limit_nm=bg + _u(rng, 1.0, 2.0) * tau_rms)

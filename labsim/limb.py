@@ -219,7 +219,7 @@ def soft_clip_below(tau: np.ndarray, limit: float) -> np.ndarray:
 
 
 class LimbModel:
-    """The limb side, prepared once per recording (:func:`labsim.simulate.simulate`).
+    """The limb side, prepared once per recording (:func:`labsim.simulate`).
 
     ``torque(x, v, a)`` gives tau_h (n, N) and its parts for the joint trajectories
     (n, N) on the fine grid ``t`` of step ``h``.
@@ -251,7 +251,8 @@ class LimbModel:
         self.contact = None
         if self.fp is not None and self.fp.backlash_rad:
             w = 2 * np.pi * self.fp.contact_hz
-            self.contact = StateSpace.from_tf([w * w], [1.0, 1.4 * w, w * w], derivatives=2)
+            self.contact = StateSpace.from_zpk([], np.roots([1.0, 1.4 * w, w * w]), w * w,
+                                               derivatives=2)
 
     def kinematics(self, x, v, a):
         """The footplate's angle, velocity, acceleration: the encoder's x, or with backlash

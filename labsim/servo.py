@@ -12,8 +12,9 @@ from the nominal ``I0 x'' + B0 x' + K0 x`` by ``d``: the loop is solved as the f
 ``d = tau_limb(x[d]) - nominal(x[d])`` (waveform relaxation; White et al., IEEE TCAD 4,
 1985), accelerated by Anderson mixing (Walker & Ni, SIAM J Numer Anal 49:1715, 2011).
 Because the servo is stiff (Kp >> K), the limb's deviation moves the joint little and the
-iteration contracts fast; it stops when the torque residual is below 1e-10 of the torque
-scale and refuses (SimulationError) if it does not converge.
+iteration contracts fast (2-16 iterations; a backlash's play about 40); it stops when the
+torque residual is below 1e-9 of the torque scale (or stagnates below 1e-7 at the
+round-off of the linear parts) and refuses (SimulationError) if it does not converge.
 """
 
 from __future__ import annotations
@@ -34,10 +35,15 @@ class SimulationError(RuntimeError):
 class ServoLoop:
     """The LTI loop of a ``"pd"`` servo for n joints (module docstring).
 
+    With ``contact_hz`` (backlash between motor and footplate), the footplate side follows
+    the motor through a linear contact, x_f'' = wc^2 (x - x_f) - 1.4 wc x_f', and the
+    motor carries the load I0 x_f'' + B0 x_f' + K0 x_f (the play's deviation from it is
+    in d); the gains are still set for the motor plus the limb.
+
     Attributes ``Kp``, ``Kd``, ``Ki`` (n,) [N m/rad, N m s/rad, N m/(rad s)], ``Jm`` (n,).
     """
 
-    def __init__(self, servo, I0, B0, K0, h: float):
+    def __init__(self, servo, I0, B0, K0, h: float, contact_hz: float | None = None):
         n = I0.shape[0]
         self.n, self.h = n, h
         self.Jm = per_joint(servo.motor_inertia, n, "servo.motor_inertia")
@@ -47,12 +53,13 @@ class ServoLoop:
         self.Kd = 2 * servo.damping * mass * w
         self.Ki = self.Kp * 2 * np.pi * servo.integral_hz
         lag = servo.actuator_lag_s
-        Minv = np.linalg.inv(np.diag(self.Jm) + I0)
-        blocks = ["x", "v"] + (["u"] if lag > 0 else []) + (["e"] if servo.integral_hz > 0 else [])
+        blocks = ["x", "v"] + (["u"] if lag > 0 else []) + \
+            (["e"] if servo.integral_hz > 0 else []) + (["xf", "vf"] if contact_hz else [])
         idx = {b: slice(i * n, (i + 1) * n) for i, b in enumerate(blocks)}
         ns = len(blocks) * n
-        # u_cmd = Kp (r - x) - Kd v + Ki e as rows over [state | r, d]
-        ucmd = np.zeros((n, ns + 2 * n))
+        width = ns + 2 * n  # rows over [state | r, d]
+        eye = np.eye(n)
+        ucmd = np.zeros((n, width))  # u_cmd = Kp (r - x) - Kd v + Ki e
         ucmd[:, idx["x"]] = -np.diag(self.Kp)
         ucmd[:, idx["v"]] = -np.diag(self.Kd)
         ucmd[:, ns:ns + n] = np.diag(self.Kp)
@@ -60,38 +67,57 @@ class ServoLoop:
             ucmd[:, idx["e"]] = np.diag(self.Ki)
         if "u" in idx:
             uact = np.zeros_like(ucmd)
-            uact[:, idx["u"]] = np.eye(n)
+            uact[:, idx["u"]] = eye
         else:
             uact = ucmd
-        force = uact.copy()
-        force[:, idx["x"]] -= K0
-        force[:, idx["v"]] -= B0
-        force[:, ns + n:] -= np.eye(n)
-        acc = Minv @ force
-        M = np.zeros((ns, ns + 2 * n))
-        M[idx["x"], idx["v"]] = np.eye(n)
+        if contact_hz:
+            wc = 2 * np.pi * contact_hz
+            pos, vel = np.zeros((n, width)), np.zeros((n, width))
+            pos[:, idx["xf"]], vel[:, idx["vf"]] = eye, eye
+            accf = np.zeros((n, width))
+            accf[:, idx["x"]] = wc * wc * eye
+            accf[:, idx["xf"]] = -wc * wc * eye
+            accf[:, idx["vf"]] = -1.4 * wc * eye
+            force = uact - I0 @ accf - B0 @ vel - K0 @ pos
+            force[:, ns + n:] -= eye
+            acc = np.linalg.inv(np.diag(self.Jm)) @ force
+        else:
+            force = uact.copy()
+            force[:, idx["x"]] -= K0
+            force[:, idx["v"]] -= B0
+            force[:, ns + n:] -= eye
+            acc = np.linalg.inv(np.diag(self.Jm) + I0) @ force
+            pos, vel, accf = np.zeros((n, width)), np.zeros((n, width)), acc
+            pos[:, idx["x"]], vel[:, idx["v"]] = eye, eye
+        M = np.zeros((ns, width))
+        M[idx["x"], idx["v"]] = eye
         M[idx["v"]] = acc
         if "u" in idx:
             M[idx["u"]] = (ucmd - uact) / lag
         if "e" in idx:
-            M[idx["e"], ns:ns + n] = np.eye(n)
-            M[idx["e"], idx["x"]] = -np.eye(n)
-        out = np.zeros((4 * n, ns + 2 * n))
-        out[0:n, idx["x"]] = np.eye(n)
-        out[n:2 * n, idx["v"]] = np.eye(n)
+            M[idx["e"], ns:ns + n] = eye
+            M[idx["e"], idx["x"]] = -eye
+        if contact_hz:
+            M[idx["xf"]] = vel
+            M[idx["vf"]] = accf
+        out = np.zeros((7 * n, width))
+        out[0:n, idx["x"]] = eye
+        out[n:2 * n, idx["v"]] = eye
         out[2 * n:3 * n] = acc
-        out[3 * n:] = uact
+        out[3 * n:4 * n] = uact
+        out[4 * n:5 * n], out[5 * n:6 * n], out[6 * n:] = pos, vel, accf
         self.sys_r = StateSpace(M[:, :ns], M[:, ns:ns + n], out[:, :ns], out[:, ns:ns + n])
         self.sys_d = StateSpace(M[:, :ns], M[:, ns + n:], out[:, :ns], out[:, ns + n:])
 
     def respond(self, sys: StateSpace, u: np.ndarray, smooth: bool = True) -> dict:
         y = sys.simulate(u, self.h, smooth=smooth)
         n = self.n
-        return {"x": y[:n], "v": y[n:2 * n], "a": y[2 * n:3 * n], "u": y[3 * n:]}
+        names = ("x", "v", "a", "u", "xf", "vf", "af")
+        return {k: y[i * n:(i + 1) * n] for i, k in enumerate(names)}
 
 
 def solve_loop(loop: ServoLoop, limb, r: np.ndarray, *, smooth_reference: bool = True,
-               tol: float = 1e-10, max_iter: int = 60, memory: int = 5) -> dict:
+               tol: float = 1e-9, max_iter: int = 80, memory: int = 5) -> dict:
     """The servo loop with the limb: x, v, a, u, tau_h (n, N), the limb's parts, and
     ``iterations`` and ``residual`` (module docstring).
 
@@ -110,8 +136,8 @@ def solve_loop(loop: ServoLoop, limb, r: np.ndarray, *, smooth_reference: bool =
         dd = loop.respond(loop.sys_d, d, smooth=False)
         return {k: base[k] + dd[k] for k in base}
 
-    def nominal(s):
-        return limb.I0 @ s["a"] + limb.B0 @ s["v"] + limb.K0 @ s["x"]
+    def nominal(s):  # the load the loop's LTI part carries (footplate side)
+        return limb.I0 @ s["af"] + limb.B0 @ s["vf"] + limb.K0 @ s["xf"]
 
     def g(d):
         s = state(d)

@@ -168,7 +168,9 @@ def simulate(spec: RecordingSpec) -> Recording:
         loop_info = {"iterations": 0, "residual": 0.0}
         servo_truth = {"kind": "ideal"}
     else:
-        loop = ServoLoop(spec.servo, I0, B0, K0, h)
+        fp = spec.footplate
+        loop = ServoLoop(spec.servo, I0, B0, K0, h,
+                         fp.contact_hz if fp is not None and fp.backlash_rad else None)
         if spec.servo.dac == "zoh":
             held = (np.arange(Nf) // m) * m  # the last sample at or before each point
             r_in = r[0][:, held]
