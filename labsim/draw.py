@@ -13,8 +13,11 @@ Ranges, one joint (the ankle on a position servo, footplate included):
 - sensors: a 4th-order Butterworth anti-alias filter at 0.4 fs on both channels; angle
   noise 1e-5-5e-5 rad, torque noise 0.5-2 % of the perturbation torque's RMS; 16-bit
   quantisation of +-0.5 rad and +-100 N m;
-- reflex (``+reflex``): gain 10-40 N m s/rad, delay 40-50 ms (ankle stretch reflex;
-  Kearney et al. 1997; Sobhani Tehrani & Kearney's 50 ms), threshold 0-0.05 rad/s,
+- reflex (``+reflex``): gain set so that the reflex torque's fluctuation is 20-70 % of
+  the intrinsic torque's RMS (Kearney et al. 1997: the reflex pathway explains up to
+  about a third of the torque variance of active plantarflexors; the project's reklab
+  estimates, 58 -> 88 % VAF), delay 40-50 ms (ankle stretch reflex; Kearney et al. 1997;
+  Sobhani Tehrani & Kearney's 50 ms), threshold 0-0.05 rad/s,
   positive-velocity rectifier, 2nd-order activation at 1.5-3.5 Hz with damping 0.6-0.9
   (``reflex_other_damping``: 0.4-1.2 or a third-order/cascade form);
 - time variations: linear drift to 0.5-2x by the end, saturating drift to 1.3-2.5x with
@@ -22,7 +25,9 @@ Ranges, one joint (the ankle on a position servo, footplate included):
   with period 5-20 s;
 - moving joint: a sine through about -0.4..+0.2 rad (each end +-0.05) of period 10-20 s
   (Sobhani Tehrani & Kearney, IEEE TBME 69, 2022); K exponential in angle with 1.5-4 /rad
-  (Weiss, Kearney & Hunter, J Biomech 19:727, 1986) or a U with its minimum near mid-range.
+  (Weiss, Kearney & Hunter, J Biomech 19:727, 1986) or a U with its minimum near mid-range;
+  ``moving_pilot``: the same, stored as the lab's pilot file is (less an unperturbed
+  trial along the movement, RecordingSpec.movement_removed).
 
 Two joints (``n_dof=2``): a planar arm on a 2-joint manipulandum (shoulder, elbow):
 K diagonal 10-40 and 8-30 N m/rad with coupling 10-30 % of the geometric mean, B 0.3-2,
@@ -41,7 +46,8 @@ KINDS = ("nominal", "nominal_coloured_noise", "voluntary", "footplate_friction",
          "reflex_other_damping", "wobbling_other_damping", "antialias_filter",
          "linear_drift", "saturating_drift", "switching", "modulated",
          "moving_angle_dependent", "moving_linear", "channel_delay", "rest_period",
-         "stiffening_spring", "short_range_stiffness", "backlash", "contact_clipping")
+         "stiffening_spring", "short_range_stiffness", "backlash", "contact_clipping",
+         "moving_pilot")
 
 
 def _u(rng, lo, hi):
@@ -91,8 +97,9 @@ def _reflex(rng, n_dof, other_damping=False):
         form = ["second_order", "second_order", "triple_pole", "cascade"][rng.integers(4)]
         damping = _u(rng, 0.4, 1.2)
         tau = _u(rng, 0.01, 0.04)
-    gain = _u(rng, 10, 40) if n_dof == 1 else [_u(rng, 2, 8), _u(rng, 1, 5)]
-    return Reflex(gain=gain, delay_s=_u(rng, 0.040, 0.050),
+    gain = 0.0 if n_dof == 1 else [_u(rng, 2, 8), _u(rng, 1, 5)]
+    return Reflex(gain=gain, fraction=_u(rng, 0.2, 0.7) if n_dof == 1 else None,
+                  delay_s=_u(rng, 0.040, 0.050),
                   threshold_rad_s=_u(rng, 0.0, 0.05), rectify="positive", form=form,
                   f_hz=_u(rng, 1.5, 3.5), damping=damping, tau_s=tau)
 
@@ -198,12 +205,13 @@ def _apply_kind(spec, base, rng, n_dof, I1, tau_rms):
             for k in ("tau_s", "period_s", "phase_s"):
                 setattr(v, k, getattr(limb.K_var, k))
             limb.B_var = v
-    elif base in ("moving_angle_dependent", "moving_linear"):
+    elif base in ("moving_angle_dependent", "moving_linear", "moving_pilot"):
         lo, hi = -0.4 + _u(rng, -0.05, 0.05), 0.2 + _u(rng, -0.05, 0.05)
         spec.movement = Movement(kind="sine", range_rad=[lo, hi], period_s=_u(rng, 10, 20),
                                  phase_rad=_u(rng, 0, 2 * np.pi))
         spec.perturbation.amplitude_rad *= 0.7
-        if base == "moving_angle_dependent":
+        spec.movement_removed = base == "moving_pilot"
+        if base in ("moving_angle_dependent", "moving_pilot"):
             if rng.uniform() < 0.6:
                 limb.K_var = Variation(angle="exp", angle_coef=_u(rng, 1.5, 4.0))
             else:

@@ -18,7 +18,9 @@ import numpy as np
 import trialformat
 
 from . import signals as sg
-from .limb import LimbModel, angle_factor, as_matrix, per_joint
+from .lti import StateSpace
+from .limb import (LimbModel, angle_factor, as_matrix, delayed, per_joint, rectifier,
+                   reflex_filter)
 from .sensors import acquire
 from .servo import ServoLoop, SimulationError, solve_loop
 from .spec import RecordingSpec, spec_to_dict
@@ -111,7 +113,33 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
-def _resolve(spec, p, t, I0, B0, K0) -> tuple[RecordingSpec, float]:
+def _smoothed(spec, x, h):
+    """x with derivatives; a PRBS's raw steps (no derivatives) smoothed first as a servo of
+    servo.f_hz (damping 0.7) would: the levels set from fractions need the motion."""
+    pert = spec.perturbation
+    if pert.kind != "prbs" or pert.prefilter_hz is not None:
+        return x
+    w = 2 * np.pi * (spec.servo.f_hz if spec.servo.kind == "pd" else 100.0)
+    lp = StateSpace.from_zpk([], np.roots([1.0, 1.4 * w, w * w]), w * w, derivatives=2)
+    out = [lp.simulate(x[0][j], h) for j in range(x[0].shape[0])]
+    return [np.vstack([o[i] for o in out]) for i in range(3)]
+
+
+def _reflex_gain(spec, r_dot, t, h, scale) -> float:
+    """The gain giving joint 1's reflex torque a fluctuation (standard deviation over the
+    recording) of ``fraction`` times the nominal perturbation torque's RMS, for the
+    reference's velocity."""
+    rx = spec.reflex
+    u = rectifier(rx, delayed(r_dot[:1], rx.delay_s / h))[0]
+    y = reflex_filter(rx).simulate(u, h, smooth=True)
+    sd = float(np.std(y[t >= 0]))
+    if sd == 0:
+        raise ValueError("reflex.fraction: the reference's velocity never passes the "
+                         "reflex's rectifier and threshold")
+    return rx.fraction * scale / sd
+
+
+def _resolve(spec, p, r, t, h, I0, B0, K0) -> tuple[RecordingSpec, float]:
     """A copy of the spec with the levels given as fractions turned into N m."""
     spec = copy.deepcopy(spec)
     rec = t >= 0
@@ -123,11 +151,19 @@ def _resolve(spec, p, t, I0, B0, K0) -> tuple[RecordingSpec, float]:
     fp = spec.footplate
     if fp is not None and fp.friction and fp.Fc is None:
         fp.Fc = fp.friction_fraction * scale
+    if spec.reflex is not None and spec.reflex.fraction is not None:
+        spec.reflex.gain = _reflex_gain(spec, r[1], t, h, scale)
+        spec.reflex.fraction = None
     return spec, scale
 
 
 def simulate(spec: RecordingSpec) -> Recording:
     """Simulate one recording (module docstring).
+
+    With a movement and ``spec.movement_removed``, the recording is stored as the Kearney
+    lab's moving-ankle pilot is (Sobhani Tehrani & Kearney 2022): angle, torque and
+    reference less those of an unperturbed trial along the same movement (simulated with
+    its own noise and voluntary torque: seed + 1000003), the scheduling variable beside.
 
     Raises
     ------
@@ -136,6 +172,27 @@ def simulate(spec: RecordingSpec) -> Recording:
     labsim.SimulationError
         The servo loop does not converge.
     """
+    rec = _simulate_one(spec)
+    if not (spec.movement_removed and spec.movement is not None):
+        return rec
+    twin = copy.deepcopy(rec.spec)
+    twin.perturbation.amplitude_rad = 0.0
+    twin.seed = int(spec.seed) + 1000003
+    still = _simulate_one(twin)
+    trial = rec.trial
+    trial.theta = trial.theta - still.trial.theta
+    trial.tau_h = trial.tau_h - still.trial.tau_h
+    if trial.theta_ref is not None:
+        trial.theta_ref = trial.theta_ref - still.trial.theta_ref
+    trial.meta["source"] += "; movement removed (less an unperturbed trial along it)"
+    rec.truth["movement_removed"] = {
+        "seed_unperturbed": twin.seed,
+        "rms_unperturbed": still.truth["rms"],
+        "solver_unperturbed": still.truth["solver"]}
+    return rec
+
+
+def _simulate_one(spec: RecordingSpec) -> Recording:
     _check(spec)
     n, fs, m = spec.n_dof, float(spec.fs), int(spec.oversample)
     fine_rate = fs * m
@@ -147,8 +204,9 @@ def simulate(spec: RecordingSpec) -> Recording:
     p, xs, start, env = _reference(spec, t, h, fine_rate)
     lb = spec.limb
     I0, B0, K0 = (as_matrix(v, n, k) for k, v in (("I", lb.I), ("B", lb.B), ("K", lb.K)))
-    spec, tau_scale = _resolve(spec, p, t, I0, B0, K0)
     r = [p[i] + xs[i] for i in range(3)]
+    ps, rs = _smoothed(spec, p, h), _smoothed(spec, r, h)
+    spec, tau_scale = _resolve(spec, ps, rs, t, h, I0, B0, K0)
 
     tau_vol = np.zeros((n, Nf))
     if spec.voluntary is not None:

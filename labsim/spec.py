@@ -176,6 +176,9 @@ class Reflex:
         stage and a second-order twitch; Kearney, Stein & Parameswaran, IEEE TBME 44:493,
         1997 fit a 2nd order; Mirbagheri et al. 2000 report 3rd-order-like shapes).
     ``gain`` [N m s/rad] per joint (scalar: joint 1 only), ``gain_var`` its Variation.
+    ``fraction``, when given, sets joint 1's gain instead: the reflex torque's standard
+    deviation is that fraction of the nominal limb's perturbation torque RMS (for the
+    reference's velocity; the resolved gain is in the recording's spec).
     """
 
     gain: Number = 30.0
@@ -187,6 +190,7 @@ class Reflex:
     damping: float = 0.7
     tau_s: float = 0.02
     gain_var: Optional[Variation] = None
+    fraction: Optional[float] = None
 
 
 @dataclass
@@ -288,7 +292,11 @@ class Sensors:
 @dataclass
 class RecordingSpec:
     """A whole simulated recording (docs/labsim.md). ``oversample``: internal steps per
-    sample; ``preroll_s``: simulated before t = 0 and dropped (start transients)."""
+    sample; ``preroll_s``: simulated before t = 0 and dropped (start transients);
+    ``kind``, ``condition``: labels (the truth's, the metadata's); ``scheduling_channel``:
+    the extra column holding the commanded slow angle of a moving joint (None: none);
+    ``movement_removed``: store a moving joint's recording less an unperturbed trial
+    along the same movement (:func:`labsim.simulate`)."""
 
     duration_s: float = 60.0
     fs: float = 1000.0
@@ -309,6 +317,7 @@ class RecordingSpec:
     kind: str = "custom"
     condition: Optional[str] = None
     scheduling_channel: Optional[str] = "sv"
+    movement_removed: bool = False
 
 
 _PARTS = {

@@ -139,6 +139,31 @@ def test_two_joints_frf_matrix_is_k_b_i():
         np.testing.assert_allclose(Yk @ np.linalg.inv(Xk), Z, rtol=0, atol=1e-5 * np.abs(Z).max())
 
 
+def test_reflex_fraction_sets_the_gain():
+    rx = labsim.Reflex(gain=0.0, fraction=0.4, rectify="none")
+    rec = labsim.simulate(ideal(reflex=rx, duration_s=10.0))
+    assert rec.spec.reflex.fraction is None and rec.spec.reflex.gain > 0
+    sd = np.std(rec.truth["arrays"]["tau_reflex"])
+    assert sd == pytest.approx(0.4 * rec.truth["perturbation_torque_rms_nm"], rel=0.01)
+
+
+def test_movement_removed_is_the_perturbed_less_the_unperturbed_trial():
+    mov = labsim.Movement(kind="sine", range_rad=[-0.3, 0.1], period_s=5.0)
+    base = dict(duration_s=10.0, movement=mov, limb=labsim.Limb(
+        K=60.0, K_var=labsim.Variation(angle="exp", angle_coef=2.0)))
+    full = labsim.simulate(labsim.RecordingSpec(**base))
+    removed = labsim.simulate(labsim.RecordingSpec(**base, movement_removed=True))
+    # the reference less the movement is the perturbation alone
+    sv = removed.trial.extra["sv"]
+    np.testing.assert_allclose(removed.trial.theta_ref[:, 0], full.trial.theta_ref[:, 0] - sv,
+                               atol=1e-12)
+    assert np.std(removed.trial.theta) < 0.05 and np.ptp(full.trial.theta) > 0.35
+    assert "movement_removed" in removed.truth
+    # the torque left is the perturbation's: its slow part (the elastic torque of the
+    # movement) is gone
+    assert abs(np.mean(removed.trial.tau_h)) < 0.1 * abs(np.mean(full.trial.tau_h)) + 0.5
+
+
 def test_time_profiles_against_their_formulas():
     T = 20.0
     t = np.arange(0, T, 0.01)
@@ -172,6 +197,7 @@ def test_every_kind_simulates_and_its_truth_names_it(kind):
         "stiffening_spring": "stiffening_spring",
         "short_range_stiffness": "short_range_stiffness", "backlash": "backlash",
         "contact_clipping": "contact_clipping", "nominal_coloured_noise": "coloured_noise",
+        "moving_pilot": "angle_dependent_K",
     }.get(kind)
     assert "reflex" in names and "servo_dynamics" in names
     if expected:
