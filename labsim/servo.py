@@ -100,20 +100,25 @@ class ServoLoop:
         if contact_hz:
             M[idx["xf"]] = vel
             M[idx["vf"]] = accf
-        out = np.zeros((7 * n, width))
+        self.contact = bool(contact_hz)
+        out = np.zeros(((7 if contact_hz else 4) * n, width))
         out[0:n, idx["x"]] = eye
         out[n:2 * n, idx["v"]] = eye
         out[2 * n:3 * n] = acc
         out[3 * n:4 * n] = uact
-        out[4 * n:5 * n], out[5 * n:6 * n], out[6 * n:] = pos, vel, accf
+        if contact_hz:  # the footplate side's own outputs (else it is the motor's)
+            out[4 * n:5 * n], out[5 * n:6 * n], out[6 * n:] = pos, vel, accf
         self.sys_r = StateSpace(M[:, :ns], M[:, ns:ns + n], out[:, :ns], out[:, ns:ns + n])
         self.sys_d = StateSpace(M[:, :ns], M[:, ns + n:], out[:, :ns], out[:, ns + n:])
 
     def respond(self, sys: StateSpace, u: np.ndarray, smooth: bool = True) -> dict:
         y = sys.simulate(u, self.h, smooth=smooth)
         n = self.n
-        names = ("x", "v", "a", "u", "xf", "vf", "af")
-        return {k: y[i * n:(i + 1) * n] for i, k in enumerate(names)}
+        names = ("x", "v", "a", "u", "xf", "vf", "af") if self.contact else ("x", "v", "a", "u")
+        out = {k: y[i * n:(i + 1) * n] for i, k in enumerate(names)}
+        if not self.contact:
+            out.update(xf=out["x"], vf=out["v"], af=out["a"])
+        return out
 
 
 def solve_loop(loop: ServoLoop, limb, r: np.ndarray, *, smooth_reference: bool = True,
@@ -134,7 +139,12 @@ def solve_loop(loop: ServoLoop, limb, r: np.ndarray, *, smooth_reference: bool =
         # d unequalised: the sensor's torque u - J_m x'' then equals the limb's own sum
         # at every grid point (an algebraic output of the loop)
         dd = loop.respond(loop.sys_d, d, smooth=False)
-        return {k: base[k] + dd[k] for k in base}
+        s = {k: base[k] + dd[k] for k in ("x", "v", "a", "u")}
+        if loop.contact:
+            s.update({k: base[k] + dd[k] for k in ("xf", "vf", "af")})
+        else:
+            s.update(xf=s["x"], vf=s["v"], af=s["a"])
+        return s
 
     def nominal(s):  # the load the loop's LTI part carries (footplate side)
         return limb.I0 @ s["af"] + limb.B0 @ s["vf"] + limb.K0 @ s["xf"]

@@ -67,7 +67,7 @@ def test_backlash_footplate_follows_the_play_through_the_contact():
 
 
 def test_backlash_on_the_pd_servo_converges_and_sensor_equals_limb():
-    spec = labsim.RecordingSpec(duration_s=8.0,
+    spec = labsim.RecordingSpec(duration_s=4.0,
                                 footplate=labsim.Footplate(backlash_rad=0.002))
     rec = labsim.simulate(spec)
     assert rec.truth["solver"]["residual"] < 1e-7
@@ -182,7 +182,7 @@ def test_time_profiles_against_their_formulas():
 @pytest.mark.parametrize("kind", labsim.KINDS)
 def test_every_kind_simulates_and_its_truth_names_it(kind):
     rng = np.random.default_rng(11)
-    spec = labsim.draw(kind + "+reflex", rng, duration_s=4.0)
+    spec = labsim.draw(kind + "+reflex", rng, duration_s=2.0)
     assert spec.reflex is not None and spec.kind == kind + "+reflex"
     assert 0.040 <= spec.reflex.delay_s <= 0.050
     rec = labsim.simulate(spec)
