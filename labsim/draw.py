@@ -225,7 +225,7 @@ def _apply_kind(spec, base, rng, n_dof, I1, tau_rms):
         spec.sensors.tau.delay_s = _u(rng, 0.0005, 0.003)
     elif base == "rest_period":
         a = _u(rng, 0.2, 0.6) * spec.duration_s
-        spec.perturbation.rest = [[a, a + _u(rng, 5, 10)]]
+        spec.perturbation.rest = [[a, a + min(_u(rng, 5, 10), 0.3 * spec.duration_s)]]
     elif base == "stiffening_spring":
         K = float(np.atleast_2d(limb.K)[0, 0])
         amp = spec.perturbation.amplitude_rad

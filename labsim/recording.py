@@ -21,6 +21,7 @@ from . import signals as sg
 from .lti import StateSpace
 from .limb import (LimbModel, angle_factor, as_matrix, delayed, per_joint, rectifier,
                    reflex_filter)
+from .checks import check_spec
 from .sensors import acquire
 from .servo import ServoLoop, SimulationError, solve_loop
 from .spec import RecordingSpec, spec_to_dict
@@ -50,28 +51,6 @@ class Recording:
     trial: trialformat.Trial
     truth: dict
     spec: RecordingSpec
-
-
-def _check(spec: RecordingSpec) -> None:
-    if spec.n_dof < 1:
-        raise ValueError(f"n_dof must be >= 1, got {spec.n_dof!r}")
-    if spec.oversample < 1 or int(spec.oversample) != spec.oversample:
-        raise ValueError(f"oversample must be a positive integer, got {spec.oversample!r}")
-    if spec.duration_s * spec.fs < 2:
-        raise ValueError(f"duration_s={spec.duration_s!r} s holds fewer than 2 samples")
-    if spec.servo.kind not in ("ideal", "pd"):
-        raise ValueError(f"servo.kind must be 'ideal' or 'pd', got {spec.servo.kind!r}")
-    if spec.servo.dac not in ("zoh", "continuous"):
-        raise ValueError(f"servo.dac must be 'zoh' or 'continuous', got {spec.servo.dac!r}")
-    if spec.perturbation.kind not in ("noise", "prbs", "multisine"):
-        raise ValueError(f"perturbation.kind must be noise, prbs or multisine; got "
-                         f"{spec.perturbation.kind!r}")
-    if (spec.servo.kind == "ideal" and spec.perturbation.kind == "prbs"
-            and spec.perturbation.prefilter_hz is None):
-        raise ValueError("an ideal servo needs a smooth reference: give the PRBS a "
-                         "perturbation.prefilter_hz (its steps have no finite velocity)")
-    if spec.reflex is not None and spec.reflex.delay_s > spec.preroll_s:
-        raise ValueError("reflex.delay_s is longer than the pre-roll")
 
 
 def _joints(sel, n: int, what: str) -> list:
@@ -193,7 +172,7 @@ def simulate(spec: RecordingSpec) -> Recording:
 
 
 def _simulate_one(spec: RecordingSpec) -> Recording:
-    _check(spec)
+    check_spec(spec)
     n, fs, m = spec.n_dof, float(spec.fs), int(spec.oversample)
     fine_rate = fs * m
     h = 1.0 / fine_rate
@@ -283,6 +262,8 @@ def _trial(spec, theta, tau, ref, slow) -> trialformat.Trial:
     if spec.movement is not None and spec.scheduling_channel:
         j = _joints(spec.movement.joints, n, "movement")[0] - 1
         extra[spec.scheduling_channel] = slow[j].copy()
+        # declared as a lab's sidecar does (docs/spec/log-format.md, "scheduling")
+        meta["scheduling"] = {"name": spec.scheduling_channel, "units": "rad"}
     return trialformat.Trial(
         meta=meta, t=np.arange(theta.shape[1]) / fs, theta=theta.T.copy(),
         tau_h=tau.T.copy(), theta_ref=ref.T.copy() if spec.record_reference else None,

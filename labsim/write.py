@@ -10,6 +10,7 @@ and ``NAME.truth.json`` beside them (never read by the diagnosis). Representatio
   N = 4..17); ``"fixedD"``: D decimals (``%.Df``, D = 1..17), ``t`` too;
 - ``"float32"``: values rounded to single precision, printed as the shortest text of
   each float32; ``"float32_9"``: the float32 printed with ``%.9g``;
+- ``"pandas"``: ``DataFrame.to_csv`` with its defaults (shortest round-trip text);
 - ``"semicolon"``, ``"tab"``: other separators (``.`` decimal mark); ``"quoted"``: the csv
   module's QUOTE_NONNUMERIC (quoted header); ``"excel"``: UTF-8 with a byte-order mark and
   CRLF line ends; ``"gzip"``: ``NAME.csv.gz``;
@@ -21,10 +22,14 @@ and ``NAME.truth.json`` beside them (never read by the diagnosis). Representatio
   stored transposed, ``MATLAB_class`` attributes, the metadata a JSON char array).
 
 The file stores tau_h with the spec's ``sensors.torque_sign`` (the metadata declares it).
+A moving joint's scheduling variable is the extra column ``sv`` declared by the metadata
+key ``scheduling`` in the CSV forms; a ``.mat`` holds it as the variable ``sv``, which
+trialformat does not read, so its metadata does not declare it.
 """
 
 from __future__ import annotations
 
+import copy
 import csv
 import gzip
 import io
@@ -36,7 +41,8 @@ import numpy as np
 
 import trialformat
 
-REPRESENTATIONS = ("csv", "csv17", "sigN", "fixedD", "float32", "float32_9", "semicolon",
+REPRESENTATIONS = ("csv", "csv17", "sigN", "fixedD", "float32", "float32_9", "pandas",
+                   "semicolon",
                    "tab", "quoted", "excel", "gzip", "decimal_comma", "mat5",
                    "mat5_struct", "mat5_float32", "mat73")
 
@@ -138,6 +144,11 @@ def _csv_bytes(rep: str, trial) -> bytes:
         cells = _float32_text(table, None if rep == "float32" else "%.9g")
         cells[:, 0] = [repr(float(v)) for v in table[:, 0]]  # t exact: only data single
         return _text_csv(header, cells)
+    if rep == "pandas":
+        import pandas as pd
+        buf = io.StringIO()
+        pd.DataFrame(table, columns=header).to_csv(buf, index=False)
+        return buf.getvalue().encode()
     if rep == "semicolon":
         return _printf_csv(header, table, "%.17g", sep=";")
     if rep == "tab":
@@ -230,6 +241,9 @@ def write(rec, folder, name: str, representation: str = "csv17", *,
         trialformat.atomic_write(paths["meta"], lambda fh: fh.write(meta_bytes))
     elif rep.startswith("mat"):
         paths["meta"] = None
+        if "scheduling" in trial.meta:  # trialformat reads no extra variable of a .mat
+            trial = copy.copy(trial)
+            trial.meta = {k: v for k, v in trial.meta.items() if k != "scheduling"}
         paths["data"] = stem.with_name(name + ".mat")
         if rep == "mat73":
             _write_mat73(paths["data"], trial)

@@ -221,3 +221,29 @@ def test_draw_two_joints():
     assert rec.trial.n_dof == 2 and np.asarray(rec.truth["arrays"]["K"]).shape == (4000, 2, 2)
     K = np.asarray(rec.truth["nominal"]["K"])
     assert np.allclose(K, K.T) and np.all(np.linalg.eigvalsh(K) > 0)
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(servo=labsim.Servo(f_hz=-3.0)), r"servo.f_hz must be a finite number > 0.*-3.0"),
+    (dict(perturbation=labsim.Perturbation(band_hz=[0, 600.0])),
+     r"perturbation.band_hz\[1\] .* < 500.*600"),
+    (dict(perturbation=labsim.Perturbation(kind="chirp")), r"perturbation.kind must be one of"),
+    (dict(reflex=labsim.Reflex(form="fourth")), r"reflex.form must be one of .*'fourth'"),
+    (dict(reflex=labsim.Reflex(delay_s=5.0)), r"reflex.delay_s .* <= 3.*5.0"),
+    (dict(limb=labsim.Limb(I=-0.01)), r"limb.I must be positive semi-definite"),
+    (dict(limb=labsim.Limb(K_var=labsim.Variation(time="steps"))), r"limb.K_var.time"),
+    (dict(sensors=labsim.Sensors(torque_sign=2)), r"sensors.torque_sign must be 1 or -1"),
+    (dict(perturbation=labsim.Perturbation(rest=[[5.0, 3.0]])), r"perturbation.rest\[0\]"),
+    (dict(servo=labsim.Servo(kind="ideal"), perturbation=labsim.Perturbation(kind="prbs")),
+     r"ideal servo needs a smooth reference.*prefilter_hz"),
+    (dict(n_dof=2, limb=labsim.Limb(K=[1.0, 2.0, 3.0])), r"2x2"),
+])
+def test_bad_spec_values_are_refused_by_name(change, message):
+    spec = labsim.RecordingSpec(duration_s=2.0, **change)
+    with pytest.raises(ValueError, match=message):
+        labsim.simulate(spec)
+
+
+def test_spec_from_dict_refuses_unknown_keys_by_name():
+    with pytest.raises(TypeError, match=r"limb: unknown key\(s\) \['stiffness'\]"):
+        labsim.spec_from_dict({"limb": {"stiffness": 3}})

@@ -32,7 +32,7 @@ def _rel(a, b):
 
 # representation -> (relative tolerance of the values, absolute tolerance)
 PRECISION = {
-    "csv": (0, 0), "csv17": (0, 0), "semicolon": (0, 0), "tab": (0, 0), "quoted": (0, 0),
+    "csv": (0, 0), "csv17": (0, 0), "pandas": (0, 0), "semicolon": (0, 0), "tab": (0, 0), "quoted": (0, 0),
     "gzip": (0, 0), "mat5": (0, 0), "mat5_struct": (0, 0), "mat73": (0, 0),
     "excel": (1e-14, 0), "sig6": (5e-6, 0), "sig8": (5e-8, 0), "fixed6": (0, 5.01e-7),
     # float32 text: the float32's rounding (half an ulp, 2^-24) plus the text's (as much)
