@@ -23,6 +23,8 @@ API (stable; docs/labsim.md)::
     labsim.write(rec, folder, name, representation="csv17")   # + NAME.truth.json
     spec = labsim.draw("saturating_drift+reflex", np.random.default_rng(3))
     truth = labsim.read_truth("folder/NAME.truth.json")
+    labsim.write_set("runs/set", ["nominal", "switching+reflex"], 5, seed=1,
+                     representation="mixed")     # a blind validation set
 
 ``python3 -m labsim --kind KIND --seed S --out FOLDER`` writes one recording.
 """
@@ -33,9 +35,11 @@ from .recording import Recording, simulate
 from .spec import (Channel, Filter, Footplate, Limb, Movement, Perturbation, RecordingSpec,
                    Reflex, Sensors, Servo, Variation, Voluntary, WobblingMass,
                    spec_from_dict, spec_to_dict)
-from .write import REPRESENTATIONS, read_truth, truth_document, write
+from .write import (LAB_REPRESENTATIONS, REPRESENTATIONS, read_truth, truth_document, write,
+                    write_set)
 
 __all__ = ["Channel", "Filter", "Footplate", "KINDS", "Limb", "Movement", "Perturbation",
            "REPRESENTATIONS", "Recording", "RecordingSpec", "Reflex", "Sensors", "Servo",
            "SimulationError", "Variation", "Voluntary", "WobblingMass", "draw", "read_truth",
-           "simulate", "spec_from_dict", "spec_to_dict", "truth_document", "write"]
+           "simulate", "spec_from_dict", "spec_to_dict", "truth_document", "write",
+           "write_set", "LAB_REPRESENTATIONS"]

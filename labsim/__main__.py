@@ -1,9 +1,10 @@
 """``python3 -m labsim --kind KIND --seed S --out FOLDER``: write one simulated recording.
 
 Options: ``--name`` (default ``KIND_sS``), ``--representation`` (default csv17; see
-labsim.write), ``--duration``, ``--fs``, ``--n-dof``, ``--reflex``, ``--truth-fs``;
-``--list`` prints the kinds and representations. Prints the files written and the
-recording's main truth.
+labsim.write; ``mixed`` for a set), ``--duration``, ``--fs``, ``--n-dof``, ``--reflex``,
+``--truth-fs``; ``--count N`` writes a set (N recordings of each of the comma-separated
+kinds, labsim.write_set); ``--list`` prints the kinds and representations. Prints the
+files written and the recording's main truth.
 """
 
 from __future__ import annotations
@@ -30,6 +31,9 @@ def main(argv=None) -> int:
     ap.add_argument("--reflex", action="store_true", help="add a stretch reflex")
     ap.add_argument("--truth-fs", type=float, default=100.0,
                     help="rate of the truth file's arrays [Hz] (0: every sample)")
+    ap.add_argument("--count", type=int, default=0,
+                    help="write a set: COUNT recordings of each kind in --kind (comma "
+                         "separated), with a manifest (labsim.write_set)")
     ap.add_argument("--list", action="store_true", help="print kinds and representations")
     args = ap.parse_args(argv)
     if args.list:
@@ -38,6 +42,8 @@ def main(argv=None) -> int:
         return 0
     if not args.out:
         ap.error("--out FOLDER is required")
+    if args.count:
+        return _set(args)
     try:
         spec = draw(args.kind, np.random.default_rng(args.seed), n_dof=args.n_dof,
                     reflex=True if args.reflex else None, duration_s=args.duration,
@@ -57,6 +63,25 @@ def main(argv=None) -> int:
     print(f"truth: K {tr['nominal']['K']}, B {tr['nominal']['B']}, I {tr['nominal']['I']} "
           f"(at t = 0); varies: {', '.join(tr['varies']) or 'nothing'}; effects: "
           + ", ".join(e["name"] for e in tr["effects"]))
+    return 0
+
+
+def _set(args) -> int:
+    from . import write_set
+    kinds = [k for k in args.kind.split(",") if k]
+    t0 = time.perf_counter()
+    try:
+        entries = write_set(args.out, kinds, args.count, seed=args.seed,
+                            representation=args.representation, n_dof=args.n_dof,
+                            duration_s=args.duration, fs=args.fs,
+                            truth_fs=None if args.truth_fs == 0 else args.truth_fs,
+                            progress=lambda i, n, name: print(f"[{i}/{n}] {name}",
+                                                              flush=True))
+    except (ValueError, TypeError, OSError) as exc:
+        print(f"labsim: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {len(entries)} recordings to {args.out} in {time.perf_counter() - t0:.1f} s "
+          f"(manifest _labsim_set.truth.json)")
     return 0
 
 

@@ -282,3 +282,47 @@ def _write_mat5(path: Path, trial, rep: str) -> None:
     tmp = path.with_name(f".{path.stem}.tmp.mat")
     sio.savemat(tmp, data, do_compression=True)
     tmp.replace(path)
+
+
+#: the representations a "mixed" set draws from (every one trialformat reads)
+LAB_REPRESENTATIONS = ("csv17", "sig7", "sig6", "fixed6", "float32", "float32_9", "pandas",
+                       "semicolon", "tab", "quoted", "excel", "gzip", "mat5", "mat5_struct",
+                       "mat5_float32", "mat73")
+
+
+def write_set(folder, kinds, count: int, *, seed: int = 0, representation: str = "csv17",
+              n_dof: int = 1, duration_s: float = 60.0, fs: float = 1000.0,
+              truth_fs: float | None = 100.0, progress=None) -> list:
+    """A validation set: ``count`` recordings of each kind, drawn and written to ``folder``.
+
+    Recording i of kind k is ``draw(k, default_rng([seed, index of k, i]))``, named
+    ``KIND_NNN`` (``+`` written ``_``). ``representation="mixed"`` stores each in one of
+    :data:`LAB_REPRESENTATIONS` drawn from the same generator. A manifest
+    ``_labsim_set.truth.json`` (kinds, names, files, representations) is written last;
+    like every ``*.truth.json`` it is not a trial. ``progress(i, total, name)`` is called
+    after each recording. Returns the manifest's entries.
+    """
+    from .draw import draw
+    from .recording import simulate
+    folder = Path(folder)
+    kinds = [kinds] if isinstance(kinds, str) else list(kinds)
+    entries, total, done = [], len(kinds) * int(count), 0
+    for ki, kind in enumerate(kinds):
+        for i in range(int(count)):
+            rng = np.random.default_rng([int(seed), ki, i])
+            spec = draw(kind, rng, n_dof=n_dof, duration_s=duration_s, fs=fs)
+            rep = representation
+            if rep == "mixed":
+                rep = LAB_REPRESENTATIONS[int(rng.integers(len(LAB_REPRESENTATIONS)))]
+            name = f"{kind.replace('+', '_')}_{i:03d}"
+            paths = write(simulate(spec), folder, name, rep, truth_fs=truth_fs)
+            entries.append({"name": name, "kind": kind, "representation": rep,
+                            "data": paths["data"].name, "truth": paths["truth"].name})
+            done += 1
+            if progress is not None:
+                progress(done, total, name)
+    doc = {"format": "labsim-set/1", "seed": int(seed), "kinds": kinds, "count": int(count),
+           "n_dof": n_dof, "duration_s": duration_s, "fs": fs, "recordings": entries}
+    body = json.dumps(doc, indent=1).encode()
+    trialformat.atomic_write(folder / "_labsim_set.truth.json", lambda fh: fh.write(body))
+    return entries

@@ -132,3 +132,28 @@ def test_labsim_imports_neither_diagnosis_nor_estimation(tmp_path):
         text = path.read_text()
         assert "import diagnosis" not in text and "from diagnosis" not in text, path
         assert "import estimation" not in text and "from estimation" not in text, path
+
+
+def test_write_set_mixed_representations_read_as_trials(tmp_path):
+    entries = labsim.write_set(tmp_path, ["nominal", "linear_drift+reflex"], 2, seed=4,
+                               representation="mixed", duration_s=2.0)
+    assert [e["kind"] for e in entries] == ["nominal"] * 2 + ["linear_drift+reflex"] * 2
+    manifest = json.loads((tmp_path / "_labsim_set.truth.json").read_text())
+    assert manifest["recordings"] == entries
+    trials = trialformat.read_trials(tmp_path, min_samples=1000)
+    assert sorted(t.name for t in trials) == sorted(e["name"] for e in entries)
+    for e in entries:
+        truth = labsim.read_truth(tmp_path / e["truth"])
+        assert truth["kind"] == e["kind"]
+        assert e["representation"] in labsim.LAB_REPRESENTATIONS
+    # the same seed gives the same set
+    again = labsim.write_set(tmp_path / "again", ["nominal", "linear_drift+reflex"], 2, seed=4,
+                             representation="mixed", duration_s=2.0)
+    assert again == entries
+    for e in entries:
+        a, b = tmp_path / e["data"], tmp_path / "again" / e["data"]
+        if a.suffix == ".mat":  # MATLAB's header holds the creation time: compare arrays
+            ta, tb = (trialformat.read_trial(p, min_samples=1000) for p in (a, b))
+            assert np.array_equal(ta.tau_h, tb.tau_h) and np.array_equal(ta.theta, tb.theta)
+        else:
+            assert a.read_bytes() == b.read_bytes()
