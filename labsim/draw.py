@@ -23,9 +23,16 @@ Ranges, one joint (the ankle on a position servo, footplate included):
 - time variations: linear drift to 0.5-2x by the end, saturating drift to 1.3-2.5x with
   tau 5-20 s, switching between 1 and 1.5-3x every 3-10 s, sinusoidal modulation of +-20-60 %
   with period 5-20 s;
-- moving joint: a sine through about -0.4..+0.2 rad (each end +-0.05) of period 10-20 s
+- time-varying kinds with a reflex: in half the draws the reflex gain follows K's profile
+  (50-100 % of its relative change);
+- background torque (``torque_dependent``): 2-10 N m of either sign plus a voluntary torque
+  of 20-50 % of the perturbation torque; K rises by 50-150 % (B half as much, the reflex gain
+  as much) at the background plus twice the voluntary RMS (Hunter & Kearney 1982);
+- moving joint: a sine through about -0.4..+0.2 rad (each end +-0.05) of period 10-20 s,
+  or (30 % of draws) raised-cosine ramps of 1-3 s between 3-4 levels of that range held 2-6 s
   (Sobhani Tehrani & Kearney, IEEE TBME 69, 2022); K exponential in angle with 1.5-4 /rad
   (Weiss, Kearney & Hunter, J Biomech 19:727, 1986) or a U with its minimum near mid-range;
+  with a reflex, half the draws have its gain exponential in angle, 1-3 /rad;
   ``moving_pilot``: the same, stored as the lab's pilot file is (less an unperturbed
   trial along the movement, RecordingSpec.movement_removed).
 
@@ -37,6 +44,8 @@ Gomi & Kawato, Biol Cybern 76:163, 1997), servo at 30-60 Hz, perturbation to 20 
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from .spec import (Channel, Filter, Footplate, Limb, Movement, Perturbation, RecordingSpec,
@@ -47,7 +56,7 @@ KINDS = ("nominal", "nominal_coloured_noise", "voluntary", "footplate_friction",
          "linear_drift", "saturating_drift", "switching", "modulated",
          "moving_angle_dependent", "moving_linear", "channel_delay", "rest_period",
          "stiffening_spring", "short_range_stiffness", "backlash", "contact_clipping",
-         "moving_pilot")
+         "moving_pilot", "torque_dependent")
 
 
 def _u(rng, lo, hi):
@@ -205,10 +214,30 @@ def _apply_kind(spec, base, rng, n_dof, I1, tau_rms):
             for k in ("tau_s", "period_s", "phase_s"):
                 setattr(v, k, getattr(limb.K_var, k))
             limb.B_var = v
+        if spec.reflex is not None and rng.uniform() < 0.5:  # the reflex gain too
+            g = copy.copy(limb.K_var)
+            g.ratio = float(1.0 + _u(rng, 0.5, 1.0) * (limb.K_var.ratio - 1.0))
+            spec.reflex.gain_var = g
+    elif base == "torque_dependent":
+        bg = _u(rng, 2.0, 10.0) * rng.choice([-1.0, 1.0])
+        limb.background_torque_nm = bg if n_dof == 1 else [bg, 0.0]
+        frac = _u(rng, 0.2, 0.5)
+        spec.voluntary = Voluntary(fraction=frac, band_hz=_u(rng, 1.0, 2.0))
+        # K rises by 50-150 % at the background torque plus twice the voluntary RMS
+        top = abs(bg) + 2 * frac * tau_rms
+        limb.K_var = Variation(torque_coef=_u(rng, 0.5, 1.5) / top)
+        limb.B_var = Variation(torque_coef=0.5 * limb.K_var.torque_coef)
+        if spec.reflex is not None:
+            spec.reflex.gain_var = Variation(torque_coef=_u(rng, 0.5, 1.5) / top)
     elif base in ("moving_angle_dependent", "moving_linear", "moving_pilot"):
         lo, hi = -0.4 + _u(rng, -0.05, 0.05), 0.2 + _u(rng, -0.05, 0.05)
-        spec.movement = Movement(kind="sine", range_rad=[lo, hi], period_s=_u(rng, 10, 20),
-                                 phase_rad=_u(rng, 0, 2 * np.pi))
+        if rng.uniform() < 0.7:
+            spec.movement = Movement(kind="sine", range_rad=[lo, hi],
+                                     period_s=_u(rng, 10, 20), phase_rad=_u(rng, 0, 2 * np.pi))
+        else:  # ramps and holds through the range
+            levels = list(rng.permutation(np.linspace(lo, hi, int(rng.integers(3, 5)))))
+            spec.movement = Movement(kind="ramps", levels_rad=[float(v) for v in levels],
+                                     ramp_s=_u(rng, 1.0, 3.0), hold_s=_u(rng, 2.0, 6.0))
         spec.perturbation.amplitude_rad *= 0.7
         spec.movement_removed = base == "moving_pilot"
         if base in ("moving_angle_dependent", "moving_pilot"):
@@ -221,6 +250,9 @@ def _apply_kind(spec, base, rng, n_dof, I1, tau_rms):
                                        angle_coef=_u(rng, 1.0, 3.0) / span ** 2)
             if rng.uniform() < 0.5:
                 limb.B_var = Variation(angle="linear", angle_coef=_u(rng, -1.0, 1.0))
+            if spec.reflex is not None and rng.uniform() < 0.5:
+                # stretch reflex gain rising with dorsiflexion (Mirbagheri et al. 2000)
+                spec.reflex.gain_var = Variation(angle="exp", angle_coef=_u(rng, 1.0, 3.0))
     elif base == "channel_delay":
         spec.sensors.tau.delay_s = _u(rng, 0.0005, 0.003)
     elif base == "rest_period":

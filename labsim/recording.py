@@ -20,7 +20,7 @@ import trialformat
 from . import signals as sg
 from .lti import StateSpace
 from .limb import (LimbModel, angle_factor, as_matrix, delayed, per_joint, rectifier,
-                   reflex_filter)
+                   reflex_filter, scalar_factor)
 from .checks import check_spec
 from .sensors import acquire
 from .servo import ServoLoop, SimulationError, solve_loop
@@ -104,12 +104,15 @@ def _smoothed(spec, x, h):
     return [np.vstack([o[i] for o in out]) for i in range(3)]
 
 
-def _reflex_gain(spec, r_dot, t, h, scale) -> float:
+def _reflex_gain(spec, r_dot, t, h, scale, tau_bg, slow) -> float:
     """The gain giving joint 1's reflex torque a fluctuation (standard deviation over the
     recording) of ``fraction`` times the nominal perturbation torque's RMS, for the
-    reference's velocity."""
+    reference's velocity and the gain's own variation (time, torque, angle factors)."""
     rx = spec.reflex
     u = rectifier(rx, delayed(r_dot[:1], rx.delay_s / h))[0]
+    if rx.gain_var is not None:
+        u = u * (scalar_factor(rx.gain_var, t, spec.duration_s, tau_bg[:1])[0]
+                 * angle_factor(rx.gain_var, slow[0]))
     y = reflex_filter(rx).simulate(u, h, smooth=True)
     sd = float(np.std(y[t >= 0]))
     if sd == 0:
@@ -130,9 +133,6 @@ def _resolve(spec, p, r, t, h, I0, B0, K0) -> tuple[RecordingSpec, float]:
     fp = spec.footplate
     if fp is not None and fp.friction and fp.Fc is None:
         fp.Fc = fp.friction_fraction * scale
-    if spec.reflex is not None and spec.reflex.fraction is not None:
-        spec.reflex.gain = _reflex_gain(spec, r[1], t, h, scale)
-        spec.reflex.fraction = None
     return spec, scale
 
 
@@ -195,6 +195,9 @@ def _simulate_one(spec: RecordingSpec) -> Recording:
                 t, h, v.band_hz, v.order, sg.rng_for(spec.seed, "voluntary", j + 1))
     bg0 = per_joint(lb.background_torque_nm, n, "limb.background_torque_nm")
     tau_bg = start[0][None, :] * (bg0[:, None] + tau_vol)
+    if spec.reflex is not None and spec.reflex.fraction is not None:
+        spec.reflex.gain = _reflex_gain(spec, rs[1], t, h, tau_scale, tau_bg, xs[0])
+        spec.reflex.fraction = None
     limb = LimbModel(spec, t, h, tau_bg, xs[0])
 
     first = pre

@@ -197,7 +197,7 @@ def test_every_kind_simulates_and_its_truth_names_it(kind):
         "stiffening_spring": "stiffening_spring",
         "short_range_stiffness": "short_range_stiffness", "backlash": "backlash",
         "contact_clipping": "contact_clipping", "nominal_coloured_noise": "coloured_noise",
-        "moving_pilot": "angle_dependent_K",
+        "moving_pilot": "angle_dependent_K", "torque_dependent": "torque_dependent_K",
     }.get(kind)
     assert "reflex" in names and "servo_dynamics" in names
     if expected:
