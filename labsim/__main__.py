@@ -34,6 +34,8 @@ def main(argv=None) -> int:
     ap.add_argument("--count", type=int, default=0,
                     help="write a set: COUNT recordings of each kind in --kind (comma "
                          "separated), with a manifest (labsim.write_set)")
+    ap.add_argument("--named", action="store_true",
+                    help="a set's files named KIND_NNN (default: blind rec_NNNN)")
     ap.add_argument("--list", action="store_true", help="print kinds and representations")
     args = ap.parse_args(argv)
     if args.list:
@@ -75,7 +77,7 @@ def _set(args) -> int:
                             representation=args.representation, n_dof=args.n_dof,
                             duration_s=args.duration, fs=args.fs,
                             truth_fs=None if args.truth_fs == 0 else args.truth_fs,
-                            progress=lambda i, n, name: print(f"[{i}/{n}] {name}",
+                            blind=not args.named, progress=lambda i, n, name: print(f"[{i}/{n}] {name}",
                                                               flush=True))
     except (ValueError, TypeError, OSError) as exc:
         print(f"labsim: error: {exc}", file=sys.stderr)

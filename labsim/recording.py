@@ -253,7 +253,8 @@ def _trial(spec, theta, tau, ref, slow) -> trialformat.Trial:
                     "encoder_resolution_deg": 0.0, "torque_resolution_nm": 0.0},
         "friction": {"Fc": [0.0] * n, "Fs": [0.0] * n, "sigma2": [0.0] * n,
                      "sigma0": 1000.0, "sigma1": 1.0, "ws": 0.01},
-        "source": f"labsim {__version__}: simulated lab recording ({spec.kind})",
+        # nothing of the truth (not even the kind): the trial is read blind
+        "source": f"labsim {__version__}: simulated lab recording",
     }
     if pert.kind in ("noise", "multisine"):
         meta["perturbation"]["cutoff_hz"] = float(pert.band_hz[1])

@@ -292,21 +292,24 @@ LAB_REPRESENTATIONS = ("csv17", "sig7", "sig6", "fixed6", "float32", "float32_9"
 
 def write_set(folder, kinds, count: int, *, seed: int = 0, representation: str = "csv17",
               n_dof: int = 1, duration_s: float = 60.0, fs: float = 1000.0,
-              truth_fs: float | None = 100.0, progress=None) -> list:
+              truth_fs: float | None = 100.0, blind: bool = True, progress=None) -> list:
     """A validation set: ``count`` recordings of each kind, drawn and written to ``folder``.
 
-    Recording i of kind k is ``draw(k, default_rng([seed, index of k, i]))``, named
-    ``KIND_NNN`` (``+`` written ``_``). ``representation="mixed"`` stores each in one of
-    :data:`LAB_REPRESENTATIONS` drawn from the same generator. A manifest
-    ``_labsim_set.truth.json`` (kinds, names, files, representations) is written last;
-    like every ``*.truth.json`` it is not a trial. ``progress(i, total, name)`` is called
-    after each recording. Returns the manifest's entries.
+    Recording i of kind k is ``draw(k, default_rng([seed, index of k, i]))``. Names: with
+    ``blind`` (default) ``rec_NNNN`` in an order shuffled by the seed, so that neither the
+    name nor the position tells the kind; else ``KIND_NNN`` (``+`` written ``_``).
+    ``representation="mixed"`` stores each in one of :data:`LAB_REPRESENTATIONS` drawn
+    from the recording's generator. A manifest ``_labsim_set.truth.json`` (kinds, names,
+    files, representations) is written last; like every ``*.truth.json`` it is not a
+    trial. ``progress(i, total, name)`` is called after each recording. Returns the
+    manifest's entries (in the order of kinds, then i).
     """
     from .draw import draw
     from .recording import simulate
     folder = Path(folder)
     kinds = [kinds] if isinstance(kinds, str) else list(kinds)
     entries, total, done = [], len(kinds) * int(count), 0
+    order = np.random.default_rng([int(seed), 7919]).permutation(total)
     for ki, kind in enumerate(kinds):
         for i in range(int(count)):
             rng = np.random.default_rng([int(seed), ki, i])
@@ -314,7 +317,8 @@ def write_set(folder, kinds, count: int, *, seed: int = 0, representation: str =
             rep = representation
             if rep == "mixed":
                 rep = LAB_REPRESENTATIONS[int(rng.integers(len(LAB_REPRESENTATIONS)))]
-            name = f"{kind.replace('+', '_')}_{i:03d}"
+            name = (f"rec_{order[ki * int(count) + i]:04d}" if blind
+                    else f"{kind.replace('+', '_')}_{i:03d}")
             paths = write(simulate(spec), folder, name, rep, truth_fs=truth_fs)
             entries.append({"name": name, "kind": kind, "representation": rep,
                             "data": paths["data"].name, "truth": paths["truth"].name})
@@ -322,6 +326,7 @@ def write_set(folder, kinds, count: int, *, seed: int = 0, representation: str =
             if progress is not None:
                 progress(done, total, name)
     doc = {"format": "labsim-set/1", "seed": int(seed), "kinds": kinds, "count": int(count),
+           "blind": bool(blind),
            "n_dof": n_dof, "duration_s": duration_s, "fs": fs, "recordings": entries}
     body = json.dumps(doc, indent=1).encode()
     trialformat.atomic_write(folder / "_labsim_set.truth.json", lambda fh: fh.write(body))

@@ -142,6 +142,10 @@ def test_write_set_mixed_representations_read_as_trials(tmp_path):
     assert manifest["recordings"] == entries
     trials = trialformat.read_trials(tmp_path, min_samples=1000)
     assert sorted(t.name for t in trials) == sorted(e["name"] for e in entries)
+    # blind: neither the names nor the metadata tell the kind
+    assert all(e["name"].startswith("rec_") for e in entries)
+    for t in trials:
+        assert "drift" not in json.dumps(t.meta) and "nominal" not in json.dumps(t.meta)
     for e in entries:
         truth = labsim.read_truth(tmp_path / e["truth"])
         assert truth["kind"] == e["kind"]
