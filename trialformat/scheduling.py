@@ -222,9 +222,11 @@ def request(trial, name: str) -> Scheduling:
     :func:`scheduling_of`. Used by the CLIs' ``--scheduling NAME``."""
     meta = trial.meta
     old = meta.get("scheduling")
-    if not (isinstance(old, dict) and old.get("name") == name):
-        meta["scheduling"] = name
-    return scheduling_of(trial)
+    if isinstance(old, dict) and old.get("name") == name:
+        return scheduling_of(trial)
+    found = scheduling_of(trial, name)  # refused as requested, before the metadata change
+    meta["scheduling"] = name
+    return found
 
 
 # ----------------------------------------------------------------------------- helpers
