@@ -32,6 +32,10 @@ def register(subparsers) -> None:
                    default=None,
                    help="the plant's internal RK4 step [s]; must divide the sample period "
                         "(default: the plant's, or the nearest step that divides it)")
+    p.add_argument("--scheduling", metavar="NAME", default=None,
+                   help="the scheduling variable the limb changes with: an extra column or "
+                        "nldat variable (sv), time, angle or angle[j]; as metadata "
+                        "'scheduling', which it overrides (trialformat.scheduling)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_diagnose)
 
@@ -72,7 +76,8 @@ def _diagnose(args) -> int:
     config = DiagnosisConfig(effects=_effects(args.effects))
     report = diagnose(args.folder, args.out, config=config, plant=args.fmu,
                       progress=not args.quiet, workers=args.workers,
-                      scheduler=args.scheduler, rk4_step=args.rk4_step)
+                      scheduler=args.scheduler, rk4_step=args.rk4_step,
+                      scheduling=args.scheduling)
     reports = getattr(report, "reports", None) or {None: report}
     for condition, one in reports.items():
         named = " + ".join(one.named)

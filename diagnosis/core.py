@@ -27,7 +27,7 @@ from .report import DiagnosisReport  # noqa: F401
 
 def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(),
              plant=None, progress: bool = True, workers: int | None = None,
-             scheduler=None, rk4_step: float | None = None):
+             scheduler=None, rk4_step: float | None = None, scheduling: str | None = None):
     """Diagnose the sim-to-real gap of a folder of measured trials.
 
     Parameters
@@ -54,6 +54,11 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         The plant's internal RK4 step; it must divide the trials' sample period (refused
         up front with both values). Default: the plant's, or the step nearest it that
         divides the period (any sample rate).
+    scheduling : str, optional
+        The scheduling variable (``--scheduling NAME``: an extra column, ``time``,
+        ``angle[j]``), set as every trial's metadata ``scheduling``
+        (trialformat.scheduling.request); refused up front, SchedulingError, where a trial
+        has no usable variable of that name.
 
     Returns
     -------
@@ -70,7 +75,12 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     from .inputs import load_trials, split_conditions
     options = dict(config=config, plant=plant, progress=progress, workers=workers,
                    scheduler=scheduler, rk4_step=rk4_step)
-    groups = split_conditions(load_trials(source, check=False))
+    trials = load_trials(source, check=False)
+    if scheduling is not None:
+        from trialformat.scheduling import request
+        for t in trials:
+            request(t, scheduling)
+    groups = split_conditions(trials)
     if len(groups) == 1:
         trials = next(iter(groups.values()))
         return run(DiagnosisRun(source=source, out_dir=out_dir, trials=trials,

@@ -84,6 +84,12 @@ def _analysis_arguments(p, truth_default="none") -> None:
                    help="-1: the recordings' torque has the opposite sign to the angle's "
                         "convention (as metadata sensors.torque_sign, which it overrides: "
                         "for files you cannot add a sidecar to)")
+    g.add_argument("--scheduling", metavar="NAME", default=None,
+                   help="the scheduling variable the impedance changes with: an extra "
+                        "column or nldat variable (sv), time, angle or angle[j] (the slow "
+                        "part of theta[j]); as metadata 'scheduling', which it overrides "
+                        "(default: the declared one, an nldat 'sv', or the slow angle of a "
+                        "joint that moves; docs/estimation.md)")
     g.add_argument("--pool", action="store_true",
                    help="average the spectra of unlabelled recordings of the same set-up "
                         "(by default each is estimated alone)")
@@ -200,10 +206,12 @@ def _truth(name, n):
     return None
 
 
-def _read(sources, options, torque_sign=None):
+def _read(sources, options, torque_sign=None, scheduling=None):
     """Read the trials; the readers' warnings (keys filled from the reference, an unknown
     format) go to stderr as one plain line each, not as Python warnings with source lines.
-    ``torque_sign`` (+-1, ``--torque-sign``) replaces the sign the metadata declare."""
+    ``torque_sign`` (+-1, ``--torque-sign``) replaces the sign the metadata declare;
+    ``scheduling`` (``--scheduling NAME``) the declared scheduling variable (refused,
+    SchedulingError, where a trial has no usable variable of that name)."""
     import trialformat as tf
     sources = [Path(s) for s in sources]
     trials = []
@@ -219,6 +227,10 @@ def _read(sources, options, torque_sign=None):
     if torque_sign is not None:
         for t in trials:
             _declare_torque_sign(t, torque_sign)
+    if scheduling is not None:
+        from trialformat.scheduling import request
+        for t in trials:
+            request(t, scheduling)
     from trialformat.cliargs import reader_notes
     for line in reader_notes(caught):
         print(line, file=sys.stderr)
@@ -313,7 +325,8 @@ def run_estimate(args) -> int:
     options = options_from(args)
     if args.json is not None:
         _check_json_out(args.json)
-    trials = _read(args.source, options, args.torque_sign)
+    trials = _read(args.source, options, args.torque_sign, args.scheduling)
+    print_scheduling(trials)
     failures = []
     results = lab_results(trials, options, args.truth, failures)
     status = _report_failures(failures, results)
@@ -339,7 +352,39 @@ def recorded_options(options, args) -> dict:
     if is_dataclass(out.get("reflex")):
         out["reflex"] = asdict(out["reflex"])
     out["torque_sign"] = args.torque_sign
+    out["scheduling"] = getattr(args, "scheduling", None)
     return out
+
+
+def scheduling_lines(trials) -> list:
+    """One line per recording that has a scheduling variable (trialformat.scheduling):
+    its name, units, source and range, how it was chosen, and whether its range is too
+    narrow for a parameter-varying fit; nothing for a stationary recording."""
+    from trialformat.scheduling import narrow_range, scheduling_of
+    lines = []
+    for t in trials:
+        s = scheduling_of(t)
+        if s is None:
+            continue
+        how = s.note or f"scheduling variable {s.describe()}"
+        why = narrow_range(s)
+        if why:
+            how += f"; range too narrow for a parameter-varying fit: {why}"
+        lines.append(f"{t.name}: {how}")
+    return lines
+
+
+def print_scheduling(trials) -> None:
+    """Print :func:`scheduling_lines` (the parameter-varying estimate is not built yet:
+    the user sees what was read). The readers' notes of the default rule go to stderr."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        lines = scheduling_lines(trials)
+    for line in lines:
+        print(line)
+    from trialformat.cliargs import reader_notes
+    for line in reader_notes(caught):
+        print(line, file=sys.stderr)
 
 
 def _check_json_out(path: Path) -> None:
@@ -432,7 +477,8 @@ def run_figures(args) -> int:
     options = options_from(args)
     # refused before any reading: a report replaces only its own earlier report
     tf.logs.check_report_out(args.out, args.folders, kinds=("lab", "paper"))
-    trials = _read(args.folders, options, args.torque_sign)
+    trials = _read(args.folders, options, args.torque_sign, args.scheduling)
+    print_scheduling(trials)
     kind, status = args.kind, 0
     if kind == "auto":
         kind = "paper" if _paper_kind(trials) else "lab"

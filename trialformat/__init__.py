@@ -11,6 +11,9 @@ option errors print at once.
 
 _EXPORTS = {
     "MatFileError": ".errors", "OutputError": ".errors", "TrialFormatError": ".errors",
+    "SchedulingError": ".errors",
+    "Scheduling": ".scheduling", "check_range": ".scheduling", "narrow_range": ".scheduling",
+    "scheduling_of": ".scheduling",
     "FORMAT": ".logs", "MIN_SAMPLES": ".logs", "SIGNALS": ".logs", "Trial": ".logs",
     "atomic_write": ".logs", "check_out_parent": ".logs", "check_trial": ".logs",
     "check_trial_out": ".logs", "column_names": ".logs",
@@ -21,7 +24,7 @@ _EXPORTS = {
     "write_trial_mat": ".matlab",
 }
 _SUBMODULES = ("cliargs", "csvtable", "errors", "firstuse", "logs", "matlab", "nlid",
-               "processes", "reference", "tempdirs")
+               "processes", "reference", "scheduling", "tempdirs")
 
 __all__ = ["reference", *_EXPORTS]
 

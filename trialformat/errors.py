@@ -19,3 +19,9 @@ class OutputError(ValueError):
     """An output path that would replace or delete what this project did not write (an
     input, a folder that is not one of its reports, an existing file). The message names
     the path and what would work."""
+
+
+class SchedulingError(ValueError):
+    """A scheduling variable (trialformat.scheduling) that cannot be used: unknown, of
+    another length, constant, not finite, or covering too narrow a range. The message names
+    the variable, the trial and its file, and what would work."""

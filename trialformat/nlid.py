@@ -15,15 +15,33 @@ used here:
     kept in the metadata's ``source``.
 
 Channel mapping (default): a name ``pos``, ``pos1``, ``pos2``... (also ``angle``,
-``theta``) is the measured angle ``theta[j]`` [rad] of joint j (j the trailing digits, 1
-if none); ``tq``, ``tq1``... (also ``torque``, ``tau``) is the interaction torque
-``tau_h[j]`` [N m]. A sidecar ``NAME.json`` beside ``NAME.mat`` may declare the mapping and
-the conventions::
+``theta``, ``position``) is the measured angle ``theta[j]`` [rad] of joint j (j the
+trailing digits, 1 if none); ``tq``, ``tq1``... (also ``torque``, ``tau``, ``trq``) is the
+interaction torque ``tau_h[j]`` [N m]. The NLID lab's suffixes ``Pert``, ``Meas``,
+``Measured``, ``Total``, ``Tot`` may follow the signal's name (``posPert1``, ``tqPert1``:
+the position perturbation and the torque in response to it; case ignored, ``_`` allowed).
+Any other name (``posRef1``, ``ang``) maps to nothing; two channels mapping to one column
+are refused, naming the mapping to declare. A sidecar ``NAME.json`` beside ``NAME.mat`` may
+declare the mapping and the conventions::
 
     {"channels": {"pos1": "theta[1]", "tq1": "tau_h[1]", "ref": "theta_ref[1]"},
      "torque_sign": -1,
      "meta": {"posture_deg": [0.0]},
+     "scheduling": "sv",
      "variables": {"z_pf": {"torque_sign": -1, "meta": {"condition": "pf"}}}}
+
+Auxiliary variables: an ``nldat`` object of one channel that maps to no column (the
+scheduling variable ``sv`` of a moving-joint recording, an EMG) is not a recording. It is
+attached to every recording of the file with the same number of samples, ``domainIncr`` and
+``domainStart``, as an extra column named by the variable, and described in the metadata
+key ``auxiliary`` (``{"sv": {"units": "rad", "description": CHANNEL NAME, "source":
+"nldat variable 'sv' of FILE.mat"}}``; units from ``chanUnits``, brackets stripped,
+``Default Units`` = not stated). One that cannot be attached (another length, rate or
+start, a name taken by a channel) is skipped with a one-line warning naming it and why, and
+recorded as ``{"skipped": REASON}``: it never sinks the file. ``scheduling`` (a name, or
+``{"name": ..., "units": ...}``) declares the scheduling variable
+(trialformat.scheduling); without it, a variable named ``sv`` or whose channel name says
+"scheduling" is taken by default, with a note.
 
 ``channels`` maps a channel name to ``theta[j]``, ``tau_h[j]``, ``theta_ref[j]``,
 ``tau_delta[j]``, ``tau_m[j]`` or ``null`` (ignored); ``torque_sign`` is
@@ -43,6 +61,7 @@ from __future__ import annotations
 import copy
 import json
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -52,10 +71,15 @@ from .logs import FORMAT, MAX_DOF, MIN_SAMPLES, SIGNALS, complete_metadata, fini
 
 NLDAT = "nldat"
 TARGETS = SIGNALS + ("theta_ref",)
-_DEFAULT_NAMES = {"theta": re.compile(r"^(?:pos|angle|theta|position)_?(\d*)$", re.I),
-                  "tau_h": re.compile(r"^(?:tq|torque|tau|trq)_?(\d*)$", re.I)}
+#: a suffix the NLID lab's recordings put after the signal's name (``posPert1``,
+#: ``tqPert1``: the position perturbation and the torque in response to it)
+_SUFFIX = r"(?:[_ ]?(?:pert|meas|measured|total|tot))?"
+_DEFAULT_NAMES = {"theta": re.compile(r"^(?:pos|angle|theta|position)" + _SUFFIX + r"_?(\d*)$",
+                                      re.I),
+                  "tau_h": re.compile(r"^(?:tq|torque|tau|trq)" + _SUFFIX + r"_?(\d*)$", re.I)}
 _TARGET = re.compile(r"^(" + "|".join(TARGETS) + r")\[(\d+)\]$")
-SIDECAR_KEYS = ("channels", "torque_sign", "meta", "variables", "sensors")
+SIDECAR_KEYS = ("channels", "torque_sign", "meta", "variables", "sensors", "scheduling")
+VARIABLE_KEYS = ("channels", "torque_sign", "meta", "scheduling")
 
 
 def inventory(path) -> dict:
@@ -120,17 +144,103 @@ def read_nldat_trials(path, *, variable: str | None = None,
     if not objects:
         raise MatFileError(f"{path}: holds no nldat object; its variables: "
                            f"{describe_inventory(inventory(path))}")
-    if variable is not None:
-        if variable not in objects:
-            raise MatFileError(f"{path}: no nldat variable {variable!r}; nldat objects: "
-                               f"{', '.join(objects)}")
-        objects = {variable: objects[variable]}
     unknown = sorted(set(sidecar.get("variables") or {}) - set(data))
     if unknown:
         raise MatFileError(f"{path.with_suffix('.json')}: key 'variables' names "
                            f"{unknown}, not in the file (it holds {', '.join(data)})")
-    return [_trial(path, name, obj, _settings(sidecar, name), min_samples)
-            for name, obj in objects.items()]
+    aux = {k: v for k, v in objects.items() if _auxiliary(v, _settings(sidecar, k))}
+    recordings = {k: v for k, v in objects.items() if k not in aux}
+    if not recordings:  # nothing else to attach them to: refused as recordings
+        recordings, aux = objects, {}
+    if variable is not None:
+        if variable not in objects:
+            raise MatFileError(f"{path}: no nldat variable {variable!r}; nldat objects: "
+                               f"{', '.join(objects)}")
+        if variable in aux:
+            raise MatFileError(
+                f"{path}: nldat variable {variable!r} is an auxiliary variable (one "
+                f"channel, no angle or torque), attached to the recordings as a column; "
+                f"read a recording: {', '.join(f'{path.name}:{k}' for k in recordings)}")
+        recordings = {variable: recordings[variable]}
+    trials = []
+    for name, obj in recordings.items():
+        trial = _trial(path, name, obj, _settings(sidecar, name), min_samples)
+        start = _scalar(obj.properties, "domainStart", name) \
+            if "domainStart" in obj.properties else 0.0
+        for aux_name, aux_obj in aux.items():
+            _attach(path, trial, start, aux_name, aux_obj)
+        trials.append(trial)
+    return trials
+
+
+def _auxiliary(obj, settings: dict) -> bool:
+    """True for an object of one channel that maps to no column (sidecar or default names)."""
+    props = getattr(obj, "properties", None)
+    if not isinstance(props, dict) or "dataSet" not in props:
+        return False
+    shape = np.shape(props["dataSet"])
+    try:
+        names = _names(props.get("chanNames", np.zeros(0)))
+    except Exception:  # noqa: BLE001 - a malformed object is the recording reader's to name
+        return False
+    if len(shape) not in (1, 2) or (len(shape) == 2 and shape[1] != 1) or len(names) != 1:
+        return False
+    declared = settings["channels"]
+    if names[0] in declared:
+        return declared[names[0]] is None
+    return not any(p.match(names[0]) for p in _DEFAULT_NAMES.values())
+
+
+def _units(props, names) -> list:
+    """Per-channel units of ``chanUnits`` (``(rad)`` -> ``rad``; ``Default Units`` or a
+    count that does not match the channels: not stated, "")."""
+    try:
+        units = _names(props.get("chanUnits", np.zeros(0)))
+    except Exception:  # noqa: BLE001 - units are a description; absent is "not stated"
+        units = []
+    if len(units) != len(names):
+        return [""] * len(names)
+    out = []
+    for u in units:
+        u = u.strip().strip("()[]").strip()
+        out.append("" if u.lower() in ("default units", "default", "none") else u)
+    return out
+
+
+def _attach(path: Path, trial, start: float, name: str, obj) -> None:
+    """Add auxiliary variable ``name`` to ``trial`` as an extra column (module docstring),
+    or record and warn why it is skipped."""
+    props = obj.properties
+    source = f"nldat variable '{name}' of {path.name}"
+    aux = trial.meta.setdefault("auxiliary", {})
+    reason = None
+    data = np.asarray(props["dataSet"])
+    if data.dtype.kind not in "biuf":
+        reason = f"not numeric (dtype {data.dtype})"
+    else:
+        try:
+            incr = _scalar(props, "domainIncr", source)
+            own_start = _scalar(props, "domainStart", source) if "domainStart" in props \
+                else 0.0
+        except MatFileError as exc:
+            incr, own_start, reason = None, None, str(exc).split(": ", 1)[-1]
+        n = data.shape[0]
+        if reason is None and (n != trial.n_samples or not np.isfinite(incr) or
+                               abs(incr * trial.fs - 1) > 1e-9):
+            reason = (f"{n} samples at {1 / incr if incr else float('nan'):g} Hz, the "
+                      f"recording {trial.n_samples} at {trial.fs:g} Hz")
+        elif reason is None and abs(own_start - start) > incr / 2:
+            reason = f"starts at {own_start:g} s, the recording at {start:g} s"
+        elif reason is None and name in trial.extra:
+            reason = "the recording has a channel of that name"
+    if reason is not None:
+        aux[name] = {"skipped": reason, "source": source}
+        warnings.warn(f"{path.name}:{trial.name}: {source} not attached ({reason}); "
+                      f"skipped", stacklevel=4)
+        return
+    names = _names(props.get("chanNames", np.zeros(0)))
+    trial.extra[name] = data.astype(float).reshape(-1)
+    aux[name] = {"units": _units(props, names)[0], "description": names[0], "source": source}
 
 
 def _sidecar(path: Path) -> dict:
@@ -151,9 +261,9 @@ def _sidecar(path: Path) -> dict:
         if key in doc and not isinstance(doc[key], kind):
             raise MatFileError(f"{side}: key '{key}' must be a JSON object")
     for name, sub in (doc.get("variables") or {}).items():
-        if not isinstance(sub, dict) or set(sub) - {"channels", "torque_sign", "meta"}:
+        if not isinstance(sub, dict) or set(sub) - set(VARIABLE_KEYS):
             raise MatFileError(f"{side}: key 'variables.{name}' must be an object with "
-                               f"keys among channels, torque_sign, meta")
+                               f"keys among {', '.join(VARIABLE_KEYS)}")
     _fold_sensors(doc, side)
     doc["_where"] = str(side)
     return doc
@@ -187,6 +297,9 @@ def _settings(sidecar: dict, name: str) -> dict:
     channels.update(own.get("channels") or {})
     sign = own.get("torque_sign", sidecar.get("torque_sign"))
     where = sidecar.get("_where", "")
+    scheduling = own.get("scheduling", sidecar.get("scheduling"))
+    if scheduling is not None:
+        meta["scheduling"] = scheduling  # its form is checked by trialformat.scheduling
     if sign is not None and sign not in (1, -1):
         raise MatFileError(f"{where}: key 'torque_sign' must be 1 or -1, got {sign!r}")
     return {"meta": meta, "channels": channels, "torque_sign": sign, "where": where}

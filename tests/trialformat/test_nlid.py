@@ -170,3 +170,93 @@ def test_estimate_reads_the_file_and_its_folder(capsys):
         out = capsys.readouterr().out
         for name in ("z_df:", "z_pf:", "z_df2:", "z_df3:", "z_pf2:"):
             assert name in out
+
+
+# ------------------------------------------------- auxiliary variables (scheduling, issue 20)
+
+
+def _one(values, channel, units, incr=0.001, start=0.0):
+    """A one-channel nldat object (the NLID lab's scheduling variable ``sv``)."""
+    return MatlabOpaque({"dataSet": np.asarray(values, dtype=float)[:, None],
+                         "chanNames": _cell([channel]), "chanUnits": _cell([units]),
+                         "domainIncr": np.array([[incr]]), "domainStart": np.array([[start]]),
+                         "comment": np.array(["Default comment"])}, "nldat")
+
+
+@pytest.fixture(params=["v7", "v7.3"])
+def pilot_like(tmp_path, request):
+    """The moving-ankle recording's layout: io (posPert1, tqPert1) and sv, plus a second
+    one-channel variable of another length."""
+    pos, tq = _signals(6)
+    sv = 0.3 * np.sin(2 * np.pi * 0.06 * np.arange(N) / 1000.0)
+    path = tmp_path / "pilot.mat"
+    matio.save_to_mat(str(path), {
+        "io": _nldat(np.column_stack([pos, tq]), ["posPert1", "tqPert1"]),
+        "sv": _one(sv, "Scheduling Variable (SV) - Ankle Position (rad)", "(rad)"),
+        "emg": _one(sv[:5000], "TA EMG", "Default Units")}, version=request.param)
+    return path, pos, tq, sv
+
+
+def test_auxiliary_variables_are_columns_of_the_recording(pilot_like):
+    path, pos, tq, sv = pilot_like
+    with pytest.warns(UserWarning) as caught:
+        trial = tf.read_trial(path, min_samples=1000)  # one recording: io
+    assert trial.name == "io"
+    np.testing.assert_array_equal(trial.theta[:, 0], pos)  # posPert1 -> theta[1]
+    np.testing.assert_array_equal(trial.tau_h[:, 0], tq)  # tqPert1 -> tau_h[1]
+    np.testing.assert_array_equal(trial.extra["sv"], sv)
+    assert "emg" not in trial.extra
+    assert trial.meta["auxiliary"]["sv"] == {
+        "units": "rad", "description": "Scheduling Variable (SV) - Ankle Position (rad)",
+        "source": "nldat variable 'sv' of pilot.mat"}
+    assert trial.meta["auxiliary"]["emg"]["skipped"] == (
+        "5000 samples at 1000 Hz, the recording 9000 at 1000 Hz")
+    assert any("pilot.mat:io: nldat variable 'emg' of pilot.mat not attached (5000 samples"
+               in str(w.message) for w in caught)
+    s = tf.scheduling_of(trial)
+    assert (s.name, s.units, s.source) == ("sv", "rad", "nldat variable 'sv' of pilot.mat")
+    assert "taken by default" in s.note
+    with pytest.raises(tf.SchedulingError, match=r"'emg' requested.*could not be attached: "
+                                                 r"5000 samples"):
+        tf.scheduling_of(trial, "emg")
+    with pytest.warns(UserWarning):
+        one, = tf.read_trials(f"{path}:io", min_samples=1000)
+    assert "sv" in one.extra
+    with pytest.raises(MatFileError, match=r"'sv' is an auxiliary variable.*pilot.mat:io"):
+        tf.read_trial(f"{path}:sv", min_samples=1000)
+
+
+def test_a_channel_named_scheduling_and_the_sidecar_key(tmp_path):
+    pos, tq = _signals(7)
+    ramp = np.linspace(0.0, 5.0, N)
+    path = tmp_path / "bg.mat"
+    matio.save_to_mat(str(path), {"z": _nldat(np.column_stack([pos, tq]), ["pos", "tq"]),
+                                  "bg": _one(ramp, "scheduling: background torque", "Nm"),
+                                  "late": _one(ramp, "x", "", start=1.0)}, version="v7")
+    with pytest.warns(UserWarning, match="'late' of bg.mat not attached.*starts at 1 s"):
+        trial = tf.read_trial(path, min_samples=1000)
+    s = tf.scheduling_of(trial)
+    assert (s.name, s.units) == ("bg", "Nm") and "taken by default" in s.note
+    path.with_suffix(".json").write_text(json.dumps({"scheduling": "time"}))
+    with pytest.warns(UserWarning):
+        trial = tf.read_trial(path, min_samples=1000)
+    s = tf.scheduling_of(trial)
+    assert s.name == "time" and s.note is None
+
+
+def test_a_file_of_auxiliary_variables_only_is_refused_as_before(tmp_path):
+    path = tmp_path / "only.mat"
+    matio.save_to_mat(str(path), {"sv": _one(np.arange(N, dtype=float), "ankle", "rad")},
+                      version="v7")
+    with pytest.raises(MatFileError, match=r"no channel maps to theta\[j\].*'ankle'"):
+        tf.read_trials(path, min_samples=1000)
+
+
+def test_suffixed_names_that_collide_are_refused_with_the_mapping_to_declare(tmp_path):
+    pos, tq = _signals(8)
+    path = tmp_path / "two.mat"
+    matio.save_to_mat(str(path), {"z": _nldat(np.column_stack([pos, pos, tq]),
+                                              ["pos1", "posPert1", "tqPert1"])}, version="v7")
+    with pytest.raises(MatFileError, match=r"'pos1' and 'posPert1' both map to theta\[1\]; "
+                                           r"declare the mapping"):
+        tf.read_trials(path, min_samples=1000)
