@@ -68,6 +68,10 @@ def main(argv=None) -> int:
     return 0
 
 
+def _progress(i, n, name):
+    print(f"[{i}/{n}] {name}", flush=True)
+
+
 def _set(args) -> int:
     from . import write_set
     kinds = [k for k in args.kind.split(",") if k]
@@ -77,8 +81,7 @@ def _set(args) -> int:
                             representation=args.representation, n_dof=args.n_dof,
                             duration_s=args.duration, fs=args.fs,
                             truth_fs=None if args.truth_fs == 0 else args.truth_fs,
-                            blind=not args.named, progress=lambda i, n, name: print(f"[{i}/{n}] {name}",
-                                                              flush=True))
+                            blind=not args.named, progress=_progress)
     except (ValueError, TypeError, OSError) as exc:
         print(f"labsim: error: {exc}", file=sys.stderr)
         return 2

@@ -10,7 +10,6 @@ truth. Nothing here imports the project's diagnosis or estimation.
 from __future__ import annotations
 
 import copy
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +22,7 @@ from .limb import (LimbModel, angle_factor, as_matrix, delayed, per_joint, recti
                    reflex_filter, scalar_factor)
 from .checks import check_spec
 from .sensors import acquire
-from .servo import ServoLoop, SimulationError, solve_loop
+from .servo import ServoLoop, solve_loop
 from .spec import RecordingSpec, spec_to_dict
 
 __version__ = "1"

@@ -32,7 +32,8 @@ def _rel(a, b):
 
 # representation -> (relative tolerance of the values, absolute tolerance)
 PRECISION = {
-    "csv": (0, 0), "csv17": (0, 0), "pandas": (0, 0), "semicolon": (0, 0), "tab": (0, 0), "quoted": (0, 0),
+    "csv": (0, 0), "csv17": (0, 0), "pandas": (0, 0), "semicolon": (0, 0), "tab": (0, 0),
+    "quoted": (0, 0),
     "gzip": (0, 0), "mat5": (0, 0), "mat5_struct": (0, 0), "mat73": (0, 0),
     "excel": (1e-14, 0), "sig6": (5e-6, 0), "sig8": (5e-8, 0), "fixed6": (0, 5.01e-7),
     # float32 text: the float32's rounding (half an ulp, 2^-24) plus the text's (as much)
@@ -161,3 +162,12 @@ def test_write_set_mixed_representations_read_as_trials(tmp_path):
             assert np.array_equal(ta.tau_h, tb.tau_h) and np.array_equal(ta.theta, tb.theta)
         else:
             assert a.read_bytes() == b.read_bytes()
+
+
+def test_the_scheduling_variable_reads_as_declared(tmp_path, rec):
+    from trialformat.scheduling import scheduling_of
+    paths = labsim.write(rec, tmp_path, "moving", "sig8")
+    trial = trialformat.read_trial(paths["data"], min_samples=1000)
+    sched = scheduling_of(trial)
+    assert sched.name == "sv" and sched.units == "rad"
+    np.testing.assert_allclose(sched.values, rec.truth["arrays"]["sv"], rtol=5e-8, atol=1e-12)
