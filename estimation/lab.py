@@ -175,6 +175,7 @@ class LabResult:
     data_band: dict | None = None
     sensitivity: dict | None = None
     segments: list = field(default_factory=list)
+    time_variation: list = field(default_factory=list)  # estimation.timevarying, per joint
     flags: list = field(default_factory=list)
     reflex: list | None = None  # estimation.reflex.ReflexResult per trial, when asked
     #: trials the reflex fit was asked for and does not apply to: {"trial", "kind", "reason"}
@@ -198,7 +199,8 @@ class LabResult:
                "coherence_band_mean": self.coherence_band.tolist(),
                "weighting": self.weighting, "weighting_text": WEIGHTING_TEXT[self.weighting],
                "data_band": self.data_band, "sensitivity": self.sensitivity,
-               "segments": self.segments, "flags": self.flags,
+               "segments": self.segments, "time_variation": self.time_variation,
+               "flags": self.flags,
                "warnings": self.warnings}
         if self.errors_pct is not None:
             out["errors_pct"] = {k: v.tolist() for k, v in self.errors_pct.items()}
@@ -467,7 +469,10 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
     result.warnings = fit_warnings(result, options) + few_segments_warning(usable, result)
     result.warnings += time_note
     conv = convention_warnings(result, usable)
-    tv = time_varying_warnings(result)
+    tv = []
+    if options.segments != 0:  # the test diagnose shares (estimation.timevarying)
+        from .timevarying import of_trials
+        result.time_variation, tv = of_trials(usable)
     sens = sensitivity_warnings(result)
     result.warnings += conv + tv + sens
     result.flags = list(dict.fromkeys(
