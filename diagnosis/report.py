@@ -38,6 +38,7 @@ class DiagnosisReport:
     elapsed_s: float
     trials: list
     experiment: dict = field(default_factory=dict)
+    gap_in_time: dict = field(default_factory=dict)  # pipeline.when
     intervals: dict = field(default_factory=dict)
     out_dir: object = None
     extras: dict = field(default_factory=dict, repr=False)
@@ -50,7 +51,7 @@ class DiagnosisReport:
                 "conventions": self.conventions, "numerical_retries": self.numerics,
                 "timing": self.timing,
                 "ranking": self.ranking, "pairs": self.pairs, "gap": self.gap,
-                "where": self.where, "arm": self.arm, "split": self.split,
+                "where": self.where, "gap_in_time": self.gap_in_time, "arm": self.arm, "split": self.split,
                 "trials": self.trials, "experiment": self.experiment,
                 "n_simulations": self.n_simulations,
                 "elapsed_s": self.elapsed_s, "config": self.config}
@@ -68,6 +69,9 @@ def write_report(report, out_dir) -> Path:
     _plot_where(report, out / FIGURES["where"])
     _plot_ranking(report, out / FIGURES["ranking"])
     _plot_signals(report, out / FIGURES["frf"], out / FIGURES["noise"])
+    if report.gap_in_time:
+        from .pipeline.when import plot
+        plot(report.gap_in_time, out / "gap_time.png")
     _atomic_text(out / "report.json", json.dumps(_clean(report.to_dict()), indent=2))
     _atomic_text(out / "report.md", markdown(report))
     return out / "report.md"
@@ -209,6 +213,9 @@ def markdown(report) -> str:
               + "; held out " + ", ".join(f"{u['trial']}[{u['start']}:{u['stop']}]"
                                          for u in report.split["held_out"]) + ".", "",
               f"{report.n_simulations} simulations, {report.elapsed_s:.1f} s.", ""]
+    if report.gap_in_time:
+        from .pipeline.when import markdown as when_lines
+        lines += when_lines(report.gap_in_time)
     return "\n".join(lines)
 
 

@@ -7,6 +7,7 @@
  4    nominal       split; workers; nominal runs; evaluators and nominal gaps
  5    where         the gap by signal, joint, band, kind, level
  6    which         each applicable effect fitted alone; pairs
+ 6b   when          the gap per time block of the shared time-variation test
  7    how_far       calibration and held-out reductions of every fit
  8    verdict       the named effect(s); the named model's runs; the summary
  9    report        DiagnosisReport; the report folder, written atomically
@@ -20,11 +21,12 @@ options redoes only the tasks it had not finished.
 
 from __future__ import annotations
 
-from . import conventions, estimate, how_far, nominal, read, report, verdict, where, which
+from . import (conventions, estimate, how_far, nominal, read, report, verdict, when, where,
+               which)
 from .resume import ResumeStore, run_key
 from .state import DiagnosisRun
 
-STAGES = (read, conventions, estimate, nominal, where, which, how_far, verdict, report)
+STAGES = (read, conventions, estimate, nominal, where, which, when, how_far, verdict, report)
 
 
 def run(r: DiagnosisRun) -> DiagnosisRun:

@@ -50,7 +50,7 @@ def build(r) -> DiagnosisReport:
                 "resumed_tasks": 0 if r.resume is None else r.resume.n_reused},
         fitted=fitted, intervals=intervals, ranking=ranking, pairs=pair_rows,
         gap=gap_block(r, chosen, reduction),
-        where=r.where, arm=model,
+        where=r.where, arm=model, gap_in_time=r.when,
         split={"rule": r.rule,
                "calibration": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
                                for u in r.cal],

@@ -55,6 +55,7 @@ class DiagnosisRun:
     numerics: list = field(default_factory=list)
     # where
     where: dict = field(default_factory=dict)
+    when: dict = field(default_factory=dict)   # pipeline.when: the gap in time
     # which, how far
     singles: list = field(default_factory=list)
     pairs: list = field(default_factory=list)
