@@ -838,17 +838,17 @@ def time_segments(trials, band, options) -> tuple[int, list[str]]:
                  f"of at least {width:.3g} Hz works (e.g. --band {wider[0]:.4g} "
                  f"{min(wider[1], fs / 2):.4g})")
         if asked is None:
-            return 0, [f"time-variation check not done for {names}: {cause}"]
+            return 0, [f"fixed time segments not fitted for {names}: {cause}"]
         if asked > top:
             raise EstimationError(f"--segments {asked}: {cause}, or give --segments 0")
     if asked is None:
         if top >= DEFAULT_TIME_SEGMENTS:
             return DEFAULT_TIME_SEGMENTS, []
         if top >= 2:
-            return top, [f"time-variation check on {top} time segments, not "
+            return top, [f"{top} fixed time segments (results.json segments), not "
                          f"{DEFAULT_TIME_SEGMENTS}: {names} ({n / fs:.4g} s) allows at most "
                          f"{top} ({why})"]
-        return 0, [f"time-variation check not done: {names} ({n / fs:.4g} s) is too short "
+        return 0, [f"fixed time segments not fitted: {names} ({n / fs:.4g} s) is too short "
                    f"for 2 time segments ({why})"]
     if asked > top:
         largest = (f"the largest that works for it is --segments {top}" if top

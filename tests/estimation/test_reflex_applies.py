@@ -121,7 +121,7 @@ def test_default_segments_on_a_short_recording_says_so():
                     lab.AnalysisOptions(sensitivity=False))
     top = lab.max_time_segments(trial.n_samples, r.band_hz, lab.AnalysisOptions(), trial.fs)
     assert 2 <= top < 4 and len(r.segments) == top
-    assert any(w.startswith(f"time-variation check on {top} time segments, not 4")
+    assert any(w.startswith(f"{top} fixed time segments (results.json segments), not 4")
                for w in r.warnings)
     with pytest.raises(EstimationError, match="--segments must be"):
         lab.AnalysisOptions(segments=1).check()

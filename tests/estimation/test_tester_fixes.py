@@ -147,11 +147,11 @@ def test_a_narrow_band_is_named_as_the_cause_and_one_joint_says_i(tmp_path, caps
     assert "M poorly determined" not in out and "non-physical fit: M" not in out
     assert re.search(r"warning: (I|K|B) poorly determined", out), out
     assert "is too short" not in out
-    got = re.search(r"time-variation check not done for rec: the band 399-400 Hz is too "
+    got = re.search(r"fixed time segments not fitted for rec: the band 399-400 Hz is too "
                     r"narrow: .*\(e\.g\. --band ([\d.]+) ([\d.]+)\)", out)
     assert got, out
     main(["estimate", str(tmp_path / "rec.csv"), "--band", *got.groups()])
-    assert "time-variation check not done" not in capsys.readouterr().out
+    assert "fixed time segments not fitted" not in capsys.readouterr().out
 
 
 def test_window_refused_at_parse_time_naming_valid_ones(tmp_path, capsys):
