@@ -11,9 +11,11 @@ Method (docs/estimation.md, "Time variation"):
    true, and removes the slow voluntary torque and slow movements); in windows of
    ``window_s`` (1 s) the limb model is fitted by least squares on the filtered angle and
    its derivatives: one (K, B, I) per window.
-2. **Noise.** The sampling noise of a window's estimate, sigma, from the track itself: the
-   median absolute first difference of the track / (0.6745 sqrt 2) (robust to the steps
-   and drifts it is meant to find; Rousseeuw & Croux 1993 for the MAD scale).
+2. **Noise.** The sampling noise of a window's estimate, sigma, from the data: each
+   window is fitted again on its even and on its odd 0.1 s sub-blocks; the two halves
+   see the same (time-averaged) impedance, so their difference is noise alone, even
+   where the impedance changes fast; sigma = MAD scale of the differences / 2
+   (Rousseeuw & Croux 1993; :func:`window_sigma`).
 3. **Change points.** Seeded binary segmentation (Kovacs, Li, Buehlmann & Munk, Biometrika
    110:249, 2023): CUSUM statistics ``C = sqrt(n_l n_r / n) (mean_l - mean_r) / sigma``
    on a deterministic set of intervals at every scale, split where the narrowest interval
