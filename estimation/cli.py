@@ -448,6 +448,8 @@ def describe(r, torque_sign=None) -> str:
                 for p in "KBM"))
     lines += [f"  warning: {w}" for w in r.warnings]
     lines += [x.describe() for x in (r.reflex or [])]
+    from .pvlab import describe_varying
+    lines += describe_varying(getattr(r, "varying", None) or [])
     return "\n".join(lines)
 
 

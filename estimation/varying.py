@@ -145,6 +145,7 @@ class VaryingResult:
     coefficients: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     elapsed_s: float = 0.0
+    trial: str = ""
 
     @property
     def params(self) -> tuple:
