@@ -137,3 +137,28 @@ def plot_varying(fit, path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def write_varying_files(result, folder, stem) -> list:
+    """``pv_STEM.png`` (:func:`plot_varying`) and ``pv_STEM.csv`` (rho, then each
+    parameter's value, lo, hi) for each parameter-varying fit of ``result`` (LabResult);
+    a second trial's files get ``_TRIAL`` appended. Returns the paths written."""
+    import csv
+    from pathlib import Path
+    paths = []
+    for k, fit in enumerate(getattr(result, "varying", None) or []):
+        name = f"pv_{stem}" + (f"_{fit.trial}" if k else "")
+        png = Path(folder) / f"{name}.png"
+        plot_varying(fit, png)
+        table = Path(folder) / f"{name}.csv"
+        with open(table, "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            units = f" [{fit.units}]" if fit.units else ""
+            w.writerow([f"{fit.scheduling}{units}"] + [f"{p}{s}" for p in fit.params
+                                                       for s in ("", "_lo", "_hi")])
+            for i, r in enumerate(fit.rho):
+                w.writerow([repr(float(r))] + [repr(float(getattr(fit, a)[p][i]))
+                                               for p in fit.params
+                                               for a in ("values", "lo", "hi")])
+        paths += [png, table]
+    return paths
