@@ -350,14 +350,27 @@ def _reflex_dynamics(s: _Signals, A, ropt, f_lo):
     best = (np.inf, None)
     inputs = {m: _reflex_input(s, m, f_lo) for m in modes}
     shifts = np.arange(int(np.floor(d_lo)), int(np.ceil(d_hi)) + 1)
+    # every delay at once: sums over the rows of a[n] x[n - s] by FFT (estimation/reflex.py)
+    from .reflex import _correlate
+    n = s.rho.size
+    nfft = 1 << int(np.ceil(np.log2(n + shifts[-1] + 1)))
+    full = np.zeros((Q.shape[1] + 2, n))
+    full[0, rows] = r0
+    full[1:-1, rows] = Q.T
+    full[-1, rows] = 1.0
+    stack_f = np.fft.rfft(full, nfft, axis=1)
     for m in modes:
-        for fc in np.geomspace(ropt.cutoff_hz[0], fc_hi, 8):
-            for zeta in np.geomspace(*ropt.damping, 4):
+        for fc in np.geomspace(ropt.cutoff_hz[0], fc_hi, 10):
+            for zeta in np.geomspace(*ropt.damping, 5):
                 x = _reflex_col(inputs[m], 0.0, fc, zeta, s.fs)
-                for d in shifts[::2]:
-                    v = rss(np.concatenate([np.zeros(d), x[:x.size - d]]))
-                    if v < best[0]:
-                        best = (v, (m, float(d), float(fc), float(zeta)))
+                xf = np.fft.rfft(np.vstack([x, x * x]), nfft, axis=1)
+                c = _correlate(stack_f[:-1], xf[0], nfft, shifts)
+                xx = _correlate(stack_f[-1], xf[1], nfft, shifts) - np.sum(c[1:] ** 2, 0)
+                ok = xx > 1e-12 * max(float(xx.max()), 1e-300)
+                gain = np.where(ok, c[0] ** 2 / np.where(ok, xx, 1.0), 0.0)
+                j = int(np.argmax(gain))
+                if rr - gain[j] < best[0]:
+                    best = (rr - float(gain[j]), (m, float(shifts[j]), float(fc), float(zeta)))
     m, d0, fc0, z0 = best[1]
     lo = [d_lo, np.log(ropt.cutoff_hz[0]), np.log(ropt.damping[0])]
     hi = [d_hi, np.log(fc_hi), np.log(ropt.damping[1])]
