@@ -375,8 +375,9 @@ def scheduling_lines(trials) -> list:
 
 
 def print_scheduling(trials) -> None:
-    """Print :func:`scheduling_lines` (the parameter-varying estimate is not built yet:
-    the user sees what was read). The readers' notes of the default rule go to stderr."""
+    """Print :func:`scheduling_lines` (what was read; the parameter-varying estimate
+    follows each result, estimation.pvlab). The readers' notes of the default rule go to
+    stderr."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         lines = scheduling_lines(trials)

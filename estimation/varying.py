@@ -25,8 +25,8 @@ Steps (:func:`fit_varying`):
    velocity and acceleration are least-squares FIR differentiators (Savitzky-Golay, order
    4) of the low-passed angle *at the recording rate*, the window the longest whose gain
    is within 2e-5 of ``j w`` and ``-w^2`` at ``f_hi``. All are then high-passed at
-   ``f_lo`` (zero phase, order HP_ORDER = 2: above it the perturbation, below it the movement and its
-   quasi-static torque) and decimated to about ``work_fs``.
+   ``f_lo`` (zero phase, order HP_ORDER = 2: above it the perturbation, below it the
+   movement and its quasi-static torque) and decimated to about ``work_fs``.
 2. **Reflex** (``reflex`` given): the rectified velocity (before the high-pass: the reflex
    sees the whole movement), high-passed like the torque, through the unit-gain 2nd-order
    low-pass, delayed: a grid over (d, f_c, zeta) and each rectification with a constant
@@ -240,8 +240,8 @@ def _cheb(u, order):
 
 def sg_window(fs: float, f_hi: float, tol: float = 2e-5) -> int:
     """Longest odd Savitzky-Golay window (order 4, at least 5) whose first and second
-    derivative gains are within ``tol`` (2e-5: a 0.2 % gain error at 40 Hz biased
-    I by 0.1 % and, through it, K by 0.4 N m/rad on a known answer) of ``j w`` and ``-w^2`` at ``f_hi`` [Hz]."""
+    derivative gains are within ``tol`` of ``j w`` and ``-w^2`` at ``f_hi`` [Hz]
+    (5 samples at 1 kHz for 40 Hz)."""
     from scipy.signal import savgol_coeffs
     best = 5
     w = 2 * np.pi * f_hi / fs

@@ -67,7 +67,6 @@ def test_constant_truth_gives_a_flat_stiffness():
 
 
 def test_time_as_scheduling_variable():
-    theta, tau, _ = _signals(lambda r: 60 + 0 * r, seed=2)
     K_t = 40 + T  # a stiffness growing 1 N m/rad per second
     theta, tau, rho = _signals(lambda r: 0 * r, seed=2)
     d0 = theta - rho
