@@ -160,3 +160,22 @@ def test_pilot_torque_sign_advice_is_consistent(declared, tmp_path):
         assert pv["heldout_vaf_pct"]["varying"] > pv["heldout_vaf_pct"]["invariant"]
         assert pv["points"][-1]["K"][1] > pv["points"][0]["K"][2]  # K rises with the angle
         assert -0.42 < pv["points"][0]["rho"] < pv["points"][-1]["rho"] < 0.21
+
+
+def test_json_entry_and_figure_files(tmp_path):
+    from types import SimpleNamespace
+    from estimation.pvlab import varying_json, write_varying_files
+    theta, tau, rho = _signals(lambda r: 50 + 100 * r)
+    fit = fit_varying(theta, tau, rho, FS, name="sv", units="rad")
+    fit.trial = "rec"
+    doc = varying_json([fit])
+    assert doc["scheduling"] == "sv" and doc["units"] == "rad" and doc["trial"] == "rec"
+    assert len(doc["points"]) == 15
+    assert set(doc["points"][0]) == {"rho", "K", "B", "I"}
+    v, lo, hi = doc["points"][0]["K"]
+    assert lo <= v <= hi
+    paths = write_varying_files(SimpleNamespace(varying=[fit]), tmp_path, "rec")
+    assert [p.name for p in paths] == ["pv_rec.png", "pv_rec.csv"]
+    assert all(p.stat().st_size > 0 for p in paths)
+    rows = (tmp_path / "pv_rec.csv").read_text().splitlines()
+    assert rows[0].startswith("sv [rad],K,K_lo,K_hi") and len(rows) == 16
