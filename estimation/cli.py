@@ -258,6 +258,13 @@ def _check_lengths(trials, options) -> None:
         extra += f" --nfft {hint}"
     names = "; ".join(f"{t.name} (from {t.source_arg}): {t.n_samples} samples, "
                       f"{t.n_samples / t.fs:.4g} s" for t in short)
+    import numpy as np
+    if hint > n or hint >= options.nperseg:  # no segment fits: advice must not loop
+        raise tf.TrialFormatError(
+            f"{names}: too short for any spectral estimate (--nperseg {options.nperseg}; "
+            f"the smallest segment is 16 samples, and {MIN_AVERAGES} Welch averages of it "
+            f"need about {int(np.ceil(16 * (1 + (MIN_AVERAGES - 1) * (1 - frac))))} "
+            f"samples): record longer")
     raise tf.TrialFormatError(
         f"{names}: fewer than one spectral segment (--nperseg {options.nperseg}): use "
         f"--nperseg {hint}{extra} ({MIN_AVERAGES} Welch averages of {n} samples) or "
