@@ -6,7 +6,9 @@ derivatives, continuous-time activation)."""
 import numpy as np
 import pytest
 
-from estimation.reflex import derivative, fit_reflex
+import trialformat as tf
+from estimation.examples import ANKLE_CONDITIONS, write_ankle
+from estimation.reflex import derivative, fit_reflex, fit_reflex_trial
 from estimation.synthetic_reflex import parallel_cascade
 
 TRUTH = {"K": 80.0, "B": 1.0, "I": 0.015, "G": 4.0}
@@ -33,3 +35,13 @@ def test_derivative_gain_in_band():
     # np.gradient (what the fit used) is 4 % low there: the test can tell them apart
     g = np.gradient(x, 1 / fs)[10:-10]
     assert np.max(np.abs(g - exact)) / (2 * np.pi * f) > 0.03
+
+
+def test_readme_ankle_reflex_interval_holds_truth(tmp_path):
+    """The README's example ankle, relaxed_1 (K 80, B 1.2, I 0.012; the issue: K 84.3 +- 2,
+    I 0.01283 +- 6e-5 before)."""
+    path = write_ankle(tmp_path)[0]
+    r = fit_reflex_trial(tf.read_trial(path))
+    truth = ANKLE_CONDITIONS["relaxed"]
+    for p in ("K", "B", "I"):
+        assert abs(r.values[p] - truth[p]) <= r.ci[p], (p, r.values[p], r.ci[p])
