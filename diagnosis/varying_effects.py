@@ -66,6 +66,8 @@ NEST_MARGIN = 0.1
 #: interleaved / stratified blocks: about this many per trial, at least BLOCK_MIN_S long
 N_BLOCKS = 18
 BLOCK_MIN_S = 3.0
+#: grid points of the modulation period's search
+PERIOD_GRID = 40
 #: the switching effect's window for the local stiffness [s]
 SWITCH_WINDOW_S = 1.0
 #: a trial's slow torque schedules the stiffness when its 1-99 % span exceeds this many
@@ -283,6 +285,19 @@ def make_problem(lf, preps, name, fixed, cfg, unit):
 
         def split_context(self):
             return swapped(self.preps, split)
+
+        def search(self, start=None):
+            # the misfit of a period is multimodal (every harmonic of the modulation is a
+            # basin): a dense log grid of PERIOD_GRID points before the refinement
+            if name != "stiffness_modulated" or start is not None:
+                return super().search(start)
+            import dataclasses
+            saved = self.cfg
+            self.cfg = dataclasses.replace(saved, grid=PERIOD_GRID)
+            try:
+                return super().search()
+            finally:
+                self.cfg = saved
 
     prob = _SplitProblem(preps, name, fixed, cfg, unit)
     prob.split = split
