@@ -47,7 +47,7 @@ EXPECTED = {
     "moving_linear": None,
 }
 VARYING = set(vary.EFFECTS) | {"stiffness_drift"}
-REPRESENTATIONS = ("csv17", "mat5", "float32", "sigN", "pandas")
+REPRESENTATIONS = ("csv17", "mat5", "float32", "sig6", "pandas")
 
 
 def wilson(k: int, n: int, z: float = 1.96):
