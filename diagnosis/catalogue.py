@@ -229,7 +229,7 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
     # reported relative to K0; the linear coefficients' bounds only flag absurd values
     Effect("stiffness_saturating",
            "stiffness (and damping) drifting and settling, K0 (1 + change (1 - e^-t/T))",
-           (_p("change_rel", "-", (0.3, 1.5), (-0.95, 20.0), log=False),
+           (_p("change_rel", "-", (0.3, 1.5), (-0.95, 3.0), log=False),
             _p("time_constant_s", "s", (5.0, 20.0), (1.0, 200.0))),
            fit="limbfit", kinds=("position",)),
     Effect("stiffness_switching",
