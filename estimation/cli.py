@@ -258,6 +258,13 @@ def _check_lengths(trials, options) -> None:
         extra += f" --nfft {hint}"
     names = "; ".join(f"{t.name} (from {t.source_arg}): {t.n_samples} samples, "
                       f"{t.n_samples / t.fs:.4g} s" for t in short)
+    import numpy as np
+    if hint > n or hint >= options.nperseg:  # no segment fits: advice must not loop
+        raise tf.TrialFormatError(
+            f"{names}: too short for any spectral estimate (--nperseg {options.nperseg}; "
+            f"the smallest segment is 16 samples, and {MIN_AVERAGES} Welch averages of it "
+            f"need about {int(np.ceil(16 * (1 + (MIN_AVERAGES - 1) * (1 - frac))))} "
+            f"samples): record longer")
     raise tf.TrialFormatError(
         f"{names}: fewer than one spectral segment (--nperseg {options.nperseg}): use "
         f"--nperseg {hint}{extra} ({MIN_AVERAGES} Welch averages of {n} samples) or "
@@ -375,8 +382,9 @@ def scheduling_lines(trials) -> list:
 
 
 def print_scheduling(trials) -> None:
-    """Print :func:`scheduling_lines` (the parameter-varying estimate is not built yet:
-    the user sees what was read). The readers' notes of the default rule go to stderr."""
+    """Print :func:`scheduling_lines` (what was read; the parameter-varying estimate
+    follows each result, estimation.pvlab). The readers' notes of the default rule go to
+    stderr."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         lines = scheduling_lines(trials)
@@ -448,6 +456,8 @@ def describe(r, torque_sign=None) -> str:
                 for p in "KBM"))
     lines += [f"  warning: {w}" for w in r.warnings]
     lines += [x.describe() for x in (r.reflex or [])]
+    from .pvlab import describe_varying
+    lines += describe_varying(getattr(r, "varying", None) or [])
     return "\n".join(lines)
 
 

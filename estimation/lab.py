@@ -179,6 +179,8 @@ class LabResult:
     reflex: list | None = None  # estimation.reflex.ReflexResult per trial, when asked
     #: trials the reflex fit was asked for and does not apply to: {"trial", "kind", "reason"}
     reflex_not_fitted: list = field(default_factory=list)
+    #: estimation.varying.VaryingResult per trial with a scheduling variable (pvlab)
+    varying: list = field(default_factory=list)
 
     def parameters(self) -> dict:
         """``{"M"|"B"|"K": {"value", "ci", "unit", "name"}}`` with (n, n) nested lists."""
@@ -205,6 +207,9 @@ class LabResult:
         if self.reflex is not None:
             out["reflex"] = [r.to_json() for r in self.reflex]
             out["reflex_not_fitted"] = self.reflex_not_fitted
+        if self.varying:
+            from .pvlab import varying_json
+            out["parameter_varying"] = varying_json(self.varying)
         return out
 
     @property
@@ -482,6 +487,15 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
         result.warnings += [f"reflex fit not done for {s['trial']}: "
                             f"{s['reason'].removeprefix('reflex fit: ')}"
                             for s in result.reflex_not_fitted if s["kind"] != "joints"]
+    from .pvlab import varying_of_trials  # K, B, I over the scheduling variable
+    result.varying, pv_notes = varying_of_trials(usable, options)
+    result.warnings += pv_notes
+    if not any(w.startswith("torque sign") for w in result.warnings):
+        from .pvlab import sign_warnings
+        signs = sign_warnings(result.varying, usable)
+        result.warnings += signs
+        if signs and "torque sign reversed?" not in result.flags:
+            result.flags.append("torque sign reversed?")
     return result
 
 
@@ -943,7 +957,9 @@ def convention_warnings(result, trials) -> list[str]:
 
     - ``torque sign reversed?``: every diagonal K, B, M negative, or the estimate's phase
       beyond SIGN_PHASE_DEG over the lowest coherent bins of the band (median of the
-      first five with coherence >= 0.5): a passive joint has K, B, I > 0 and a phase near
+      first five with coherence >= 0.5) that lie below half the fit's natural frequency
+      sqrt(|K/M|)/(2 pi) (above it a passive joint's inertia gives 180 deg: the moving
+      pilot ankle's band starts at 13.5 Hz, above its 4 Hz): a passive joint has K, B, I > 0 and a phase near
       0 deg at low frequency. Key: ``sensors.torque_sign``.
     - ``absolute angles?``: a joint's mean angle beyond ABSOLUTE_SIGMAS standard
       deviations and ABSOLUTE_MIN_RAD while the file declares deviations. Key: ``angles``.
@@ -961,6 +977,10 @@ def convention_warnings(result, trials) -> list[str]:
         if all(getattr(fit, p)[i, i] < 0 for p in "MBK"):
             evidence.append(f"K, B, {symbol_of('M', n)} all negative")
         idx = np.nonzero(band & (result.coherence[:, i, i] >= COHERENT))[0][:5]
+        # a spring's phase 0 holds below the natural frequency only: above it the
+        # inertia's 180 deg is expected (a band that starts above it says nothing here)
+        f_n = np.sqrt(abs(fit.K[i, i]) / max(abs(fit.M[i, i]), 1e-300)) / (2 * np.pi)
+        idx = idx[result.f[idx] < f_n / 2]
         if len(idx):
             phase = float(np.degrees(np.median(np.abs(np.angle(result.Z[idx, i, i])))))
             if phase > SIGN_PHASE_DEG:

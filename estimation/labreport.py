@@ -61,6 +61,8 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
             stem = safe_name(r.label)
             names += write_frf(r, tmp / f"frf_{stem}")
             names.append(_save(bode(r), tmp / f"bode_{stem}.png"))
+            from .pvlab import write_varying_files  # K, B, I over the scheduling variable
+            names += write_varying_files(r, tmp, stem)
         names += write_parameters(results, tmp, torque_sign=(options or {}).get("torque_sign"))
         if any(getattr(r, "reflex", None) for r in results):
             from .reflex import write_reflex_tables

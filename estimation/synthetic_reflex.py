@@ -17,7 +17,7 @@ from trialformat.logs import complete_metadata
 
 def parallel_cascade(*, K=80.0, B=1.0, I=0.015, G=4.0, delay_s=0.045, cutoff_hz=3.0,
                      damping=0.7, rectify="positive", duration_s=40.0, fs=1000.0,
-                     angle_std=0.015, f_max_hz=12.0, noise=0.05, seed=0):
+                     angle_std=0.015, f_max_hz=12.0, noise=0.05, seed=0, corner_hz=4.0):
     """Angle and torque of ``tq = K th + B th' + I th'' + G LP[N(th'(t - d))] + noise``.
 
     Parameters
@@ -31,6 +31,8 @@ def parallel_cascade(*, K=80.0, B=1.0, I=0.015, G=4.0, delay_s=0.045, cutoff_hz=
     f_max_hz [Hz] : the multisine holds every third frequency of the 1/duration grid from
         0.15 Hz to f_max_hz, amplitudes falling as a 2nd-order low-pass at 4 Hz, random
         phases (the ankle recordings' perturbation has most power below 4 Hz)
+    corner_hz [Hz] : corner of that amplitude roll-off; None for a flat (broadband)
+        spectrum up to f_max_hz
     noise : torque noise standard deviation as a fraction of the noise-free torque's
     seed : random phases and noise
 
@@ -44,7 +46,7 @@ def parallel_cascade(*, K=80.0, B=1.0, I=0.015, G=4.0, delay_s=0.045, cutoff_hz=
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(duration_s * fs))) / fs
     f = np.arange(0.15, f_max_hz, 3.0 / duration_s)
-    amp = 1.0 / np.sqrt(1.0 + (f / 4.0) ** 4)
+    amp = np.ones(f.size) if corner_hz is None else 1.0 / np.sqrt(1.0 + (f / corner_hz) ** 4)
     phase = rng.uniform(0.0, 2 * np.pi, f.size)
     w = 2 * np.pi * f
 

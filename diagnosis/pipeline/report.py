@@ -47,7 +47,10 @@ def build(r) -> DiagnosisReport:
         timing={"workers": r.workers,
                 "scheduler": None if r.scheduler is None else str(r.scheduler),
                 "phases": r.timings,
-                "resumed_tasks": 0 if r.resume is None else r.resume.n_reused},
+                "resumed_tasks": 0 if r.resume is None else r.resume.n_reused,
+                # cache entries found unreadable (a truncated .npz) and recomputed
+                "recomputed_unreadable_cache_entries":
+                    0 if r.resume is None else getattr(r.resume, "n_corrupt", 0)},
         fitted=fitted, intervals=intervals, ranking=ranking, pairs=pair_rows,
         gap=gap_block(r, chosen, reduction),
         where=r.where, arm=model,

@@ -16,6 +16,7 @@ import hashlib
 import io
 import json
 import shutil
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -83,6 +84,8 @@ class ResumeStore:
         self.folder = self.root / key
         self.n_reused = 0
         self.n_stored = 0
+        #: cache entries found unreadable (a truncated .npz, a cut JSON) and recomputed
+        self.n_corrupt = 0
 
     def map(self, runner, fn, arg_tuples, desc):
         keys = [task_key(fn, a) for a in arg_tuples]
@@ -161,8 +164,10 @@ class ResumeStore:
                         return None
                     arrays = {k: z[k] for k in z.files if k != "__meta__"}
                 return tf.Trial(meta=meta["meta"], name=meta["name"], **arrays)
-        except (OSError, ValueError, KeyError, TypeError):
-            return _MISSING  # unreadable (a disk that filled up): run the task again
+        except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
+            # unreadable (a disk that filled up, a truncated .npz): run the task again
+            self.n_corrupt += 1
+            return _MISSING
         return _MISSING
 
     def keep_only_current(self) -> None:
