@@ -51,6 +51,7 @@ from scipy import signal
 
 from . import catalogue as cat
 from . import limb as lm
+from . import varying_effects as vary
 
 VERDICT_EFFECT = "effect"
 VERDICT_NONE = "no significant gap"
@@ -123,9 +124,17 @@ class PositionRecord:
 
     @classmethod
     def from_trial(cls, trial) -> "PositionRecord":
-        """From a trialformat.Trial of a position perturbation (theta, tau_h[, theta_ref])."""
-        return cls(trial.signal("theta"), trial.signal("tau_h"), trial.fs,
-                   trial.theta_ref, trial.name)
+        """From a trialformat.Trial of a position perturbation (theta, tau_h[, theta_ref]);
+        its scheduling variable (trialformat.scheduling, None when stationary) kept as
+        ``scheduling`` for the state-varying effects."""
+        rec = cls(trial.signal("theta"), trial.signal("tau_h"), trial.fs,
+                  trial.theta_ref, trial.name)
+        from trialformat import scheduling as sch
+        try:
+            rec.scheduling = sch.scheduling_of(trial)
+        except Exception:  # noqa: BLE001 - an auxiliary variable never sinks a file
+            rec.scheduling = None
+        return rec
 
 
 # ----------------------------------------------------------------------------- design
@@ -215,6 +224,8 @@ class _Prepared:
     def columns(self, name: str | None, params: dict):
         """Low-passed design columns (N, n, p) shared across records, for the effect
         ``name`` with nonlinear ``params`` (linear ones excluded)."""
+        if vary.is_varying(name):
+            return vary.columns(self, name, params)
         eff = {} if name is None else {name: _with_unit_linear(name, params)}
         channel = name in lm.CHANNEL_EFFECTS
         scaled = name in ("stiffness_amplitude", "stiffness_drift")
@@ -538,7 +549,10 @@ class EffectFit:
                 "calibration_gap": self.calibration_gap, "held_out_gap": self.held_out_gap,
                 "held_out_reduction": self.held_out_reduction,
                 "at_search_bound": self.at_search_bound,
-                "n_evaluations": self.n_evaluations}
+                "n_evaluations": self.n_evaluations,
+                **({"split": self.split} if getattr(self, "split", None) else {}),
+                **({"preferred_over": self.preferred_over}
+                   if getattr(self, "preferred_over", None) else {})}
 
 
 @dataclass
@@ -602,13 +616,18 @@ def candidates(preps, effects=None) -> list[str]:
         if not cat.get_effect(nm).applies_to("position"):
             raise ValueError(f"effect {nm!r} does not apply to position experiments; "
                              f"those are {', '.join(cat.effects_for('position'))}")
-    return [nm for nm in names if nm != "servo_bandwidth" or have_ref]
+    return [nm for nm in names if (nm != "servo_bandwidth" or have_ref)
+            and vary.applicable(preps, nm)]
 
 
 def fit_effect(preps, name: str, nominal: dict, cfg: FitConfig = FitConfig(), *,
                intervals: bool = True) -> EffectFit:
     """Fit one catalogue effect (all primary parameters, discrete choices tried in turn)
     on the calibration parts; held-out gap and jackknife intervals."""
+    if vary.is_varying(name):  # its own held-out split (diagnosis.varying_effects)
+        import sys
+        return vary.fit_effect(sys.modules[__name__], preps, name, nominal, cfg,
+                               intervals=intervals)
     effect = cat.get_effect(name)
     choices = [dict(zip(effect.choices, combo)) for combo in
                _product(*effect.choices.values())] if effect.choices else [{}]
@@ -655,6 +674,7 @@ def fit_record(fit: EffectFit) -> dict:
     search coordinates its jackknife intervals start from."""
     prob, x, lin = fit._problem
     d = fit.as_dict()
+    d["split"] = getattr(fit, "split", None)
     d.update(x=[float(v) for v in np.atleast_1d(x)], lin={k: float(v) for k, v in lin.items()},
              fixed=dict(prob.fixed))
     return d
@@ -675,7 +695,13 @@ def fit_from_record(preps, d: dict, nominal: dict, cfg: FitConfig = FitConfig())
                     float(d["calibration_gap"]), float(d["held_out_gap"]),
                     None if d["held_out_reduction"] is None else float(d["held_out_reduction"]),
                     list(d["at_search_bound"]), int(d["n_evaluations"]))
-    prob = _Problem(preps, name, d["fixed"], cfg, nominal["solution"].cal_energy)
+    if vary.is_varying(name):
+        import sys
+        prob = vary.make_problem(sys.modules[__name__], preps, name, d["fixed"], cfg,
+                                 nominal["solution"].cal_energy)
+        fit.split = d.get("split")
+    else:
+        prob = _Problem(preps, name, d["fixed"], cfg, nominal["solution"].cal_energy)
     x = np.asarray(d["x"], dtype=float)
     if x.shape != (len(prob.nl),):
         raise ValueError(f"record of {name!r} has {x.size} coordinates, not {len(prob.nl)}")
@@ -686,7 +712,9 @@ def fit_from_record(preps, d: dict, nominal: dict, cfg: FitConfig = FitConfig())
 def add_intervals(fit: EffectFit, cfg: FitConfig = FitConfig()) -> EffectFit:
     """The jackknife intervals of a fit made with ``intervals=False``."""
     prob, x, lin = fit._problem
-    fit.intervals, k = _jackknife(prob, x, lin, cfg)
+    from contextlib import nullcontext
+    with getattr(prob, "split_context", nullcontext)():  # a varying effect's own split
+        fit.intervals, k = _jackknife(prob, x, lin, cfg)
     fit.n_evaluations += k
     return fit
 
@@ -760,6 +788,7 @@ def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosi
         fits = [fit_effect(preps, nm, nominal, cfg, intervals=False)
                 for nm in candidates(preps, cfg.effects)]
         fits.sort(key=lambda f: f.calibration_objective)
+        fits = vary.prefer_simpler(fits, cfg.name_reduction)
         if fits and cfg.n_jackknife >= 2:
             add_intervals(fits[0], cfg)
     verdict, named = VERDICT_NONE, []

@@ -174,7 +174,10 @@ def draw_position_specs(rng: np.random.Generator, *, n_per_effect: int = 2,
                 "representation": str(reps[int(rng.integers(len(reps)))])}
 
     specs = []
+    from .varying_effects import EFFECTS as varying
     for name in cat.effects_for("position"):
+        if name in varying:  # no diagnosis.limb truth: validated on labsim truths
+            continue         # (bench/bench_time_state.py)
         effect = cat.get_effect(name)
         for i in range(n_per_effect):
             c = common(i)

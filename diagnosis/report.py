@@ -183,6 +183,15 @@ def markdown(report) -> str:
         lines.append(f"| {i} | {' + '.join(r['effects'])} | {_params(r['params'])}{_bound(r)} | "
                      f"{_fmt(r['calibration_gap'])} | {_fmt(r['held_out_gap'])} | "
                      f"{_fmt(100 * r['held_out_reduction'])} % | {r['n_simulations']} |")
+    splits = [r for r in report.ranking if r.get("split")]
+    if splits:
+        lines += ["", "Held-out splits of the time- and state-varying effects (the other "
+                  "rows: the default split below):", ""]
+        lines += [f"- {' + '.join(r['effects'])}: {r['split']['rule']} ({r['split']['why']})"
+                  for r in splits]
+    lines += [f"- {' + '.join(r['effects'])} ranked above {'; '.join(r['preferred_over'])}: "
+              f"the simpler (nested) effect is preferred" for r in report.ranking
+              if r.get("preferred_over")]
     if report.pairs:
         lines += ["", "Pairs of the top-ranked effects:", "",
                   f"| effects | fitted | calibration gap ({m}) | held-out gap ({m}) | "

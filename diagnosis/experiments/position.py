@@ -80,6 +80,10 @@ class PositionServo(Experiment):
         def simulate(trial, effects, n_samples):
             n = int(n_samples)
             fs = trial.fs
+            # a varying stiffness needs the schedule the fit used (diagnosis.varying_effects),
+            # which the re-simulation does not get: the named limb runs time-invariant
+            from ..varying_effects import EFFECTS as varying
+            effects = {k: v for k, v in (effects or {}).items() if k not in varying}
             try:
                 if trial.theta_ref is not None:
                     theta, tau = lm.servo_response(trial.theta_ref[:n], fs, limb, effects or {})
@@ -136,6 +140,8 @@ class PositionServo(Experiment):
                            lambda d: lf.fit_from_record(preps, d, nominal, cfg))
                 for nm in names]
         fits.sort(key=lambda f: f.calibration_objective)
+        from .. import varying_effects as vary
+        fits = vary.prefer_simpler(fits, cfg.name_reduction)  # nesting: the simpler first
         if fits and cfg.n_jackknife >= 2:
             best = fits[0]
 
@@ -153,6 +159,9 @@ class PositionServo(Experiment):
                             objective=f.calibration_objective)
             fit.intervals = None if f.intervals is None else {f.effect: f.intervals}
             fit.model = model_of(f.limb, trials[0].fs, "limbfit with " + f.effect)
+            # a varying effect's own held-out split, and the nesting rule (report)
+            fit.split = getattr(f, "split", None)
+            fit.preferred_over = getattr(f, "preferred_over", None)
             # limbfit's flags as notes (a negative linear gain: unphysical), formatted
             # with the parameters in the units they are shown in (fitting.format_flags)
             fit.value_flags = [(f.effect, k, "< 0 (unphysical)")

@@ -28,7 +28,11 @@ def ranking_row(fit, g0_cal: float, g0_held: float) -> dict:
             "at_search_bound": fit.at_search_bound,
             # the flags' parts, to format them again with the values in the file's units
             "flag_notes": fit.flag_notes(),
-            **({"intervals": fit.intervals} if getattr(fit, "intervals", None) else {})}
+            **({"intervals": fit.intervals} if getattr(fit, "intervals", None) else {}),
+            # the held-out split of a varying effect (diagnosis.varying_effects) and why
+            **({"split": fit.split} if getattr(fit, "split", None) else {}),
+            **({"preferred_over": fit.preferred_over}
+               if getattr(fit, "preferred_over", None) else {})}
 
 
 def run(r) -> None:
