@@ -59,6 +59,13 @@ def run(r) -> None:
                     + f" and was run at {r.numerics[0]['rk4_step']:.3g} s (a numerical "
                     "failure, not a model mismatch).")
     mismatches = [f for f in r.findings if not f.name.startswith("declared") and not f.note]
+    # a corrected storage/clock finding is told beside the verdict on the gap, never
+    # instead of it (issue 21, item 7)
+    stored = [f for f in mismatches if getattr(f, "storage", False)]
+    mismatches = [f for f in mismatches if f not in stored]
+    if stored:
+        summary += (" Storage finding, corrected (it does not change the verdict): "
+                    + "; ".join(f.text() for f in stored) + ".")
     if mismatches:
         if verdict == VERDICT_NONE:
             verdict = VERDICT_CONVENTION
