@@ -179,3 +179,32 @@ def test_a_storage_finding_is_told_beside_the_verdict_never_instead(monkeypatch)
     assert r.verdict == VERDICT_NONE
     assert r.summary.startswith("no significant gap")
     assert "t off the grid" in r.summary and "does not change the verdict" in r.summary
+
+
+def test_an_effect_within_5_points_of_the_named_one_is_reported_as_a_tie():
+    # issue 21 item 3: the anti-alias filter case, channel_delay 90 %, sensor lag 86 %
+    from types import SimpleNamespace
+
+    from diagnosis.pipeline.verdict import tie_text, ties
+
+    def fit(name, share):
+        return SimpleNamespace(effects=(name,), nameable=True, held_out_gap=1.0 - share)
+    singles = [fit("channel_delay", 0.90), fit("torque_sensor_lag", 0.86),
+               fit("wobbling_mass", 0.40)]
+    assert ties(singles[0], singles, 1.0) == ["torque_sensor_lag"]
+    text = tie_text(["channel_delay"], ["torque_sensor_lag"], singles[0], singles, 1.0)
+    assert "torque_sensor_lag (86 %)" in text and "cannot tell them apart" in text
+    assert "wider band" in text
+    # 10 points apart: a winner, not a tie
+    singles[1] = fit("torque_sensor_lag", 0.80)
+    assert ties(singles[0], singles, 1.0) == []
+    assert ties(None, singles, 1.0) == []
+
+
+def test_report_json_has_indistinguishable_beside_named_effects(tmp_path):
+    from diagnosis.report import DiagnosisReport
+    rep = DiagnosisReport(verdict="effect", named=["channel_delay"], summary="", amplitude={},
+                          conventions=[], numerics=[], timing={}, fitted={}, ranking=[],
+                          pairs=[], gap={}, where={}, arm={}, split={}, config={},
+                          n_simulations=0, elapsed_s=0.0, trials=[])
+    assert rep.to_dict()["indistinguishable"] == []
