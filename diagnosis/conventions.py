@@ -55,6 +55,10 @@ class Finding:
         A storage note, not a mismatch: the file stores the expected values at its
         precision (``t`` = n/fs in float32 or printed decimals). It never changes the
         verdict.
+    storage : bool
+        A finding on how ``t`` was stored or clocked (``t rounded``, ``t off the grid``):
+        corrected by reading the trial on n / fs, it is reported beside the verdict on
+        the gap and never replaces it (issue 21, item 7).
     """
 
     name: str
@@ -62,6 +66,7 @@ class Finding:
     evidence: str
     corrected: bool = True
     note: bool = False
+    storage: bool = False
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -151,21 +156,22 @@ def check_time(trials) -> list:
         off = np.max(err)
         if off > 0 and off > 4 * np.finfo(float).eps * exact[-1]:
             storage = detect_storage(stored)
-            half = 0.5 * storage.step(exact) + 4 * np.spacing(np.abs(exact))
+            half = storage.max_error(exact) + 4 * np.spacing(np.abs(exact))
             if np.all(err <= half * (1 + 1e-6)):
                 findings.append(Finding(
                     "t rounded", t.name,
                     f"t stored as {storage.describe()}, up to {off:.3g} s from n/fs: "
                     f"within its storage precision (half a step, up to "
                     f"{float(np.max(half)):.3g} s); read as uniform at fs = {t.fs:g} Hz",
-                    note=True))
+                    note=True, storage=True))
             else:
                 row = int(np.argmax(err > half * (1 + 1e-6)))
                 findings.append(Finding(
                     "t off the grid", t.name,
                     f"t stored as {storage.describe()} is up to {off:.3g} s from n/fs, "
                     f"beyond its storage precision (at sample {row}: {err[row]:.3g} s, half "
-                    f"a step {half[row]:.3g} s); read as uniform at fs = {t.fs:g} Hz"))
+                    f"a step {half[row]:.3g} s); read as uniform at fs = {t.fs:g} Hz",
+                    storage=True))
     return findings
 
 

@@ -42,10 +42,13 @@ class DiagnosisReport:
     intervals: dict = field(default_factory=dict)
     out_dir: object = None
     extras: dict = field(default_factory=dict, repr=False)
+    #: effects that explain the held-out gap as well as the named one (verdict.ties)
+    indistinguishable: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {"format": "arm-impedance-diagnosis/1", "verdict": self.verdict,
                 "summary": self.summary, "named_effects": self.named,
+                "indistinguishable": self.indistinguishable,
                 "fitted_parameters": self.fitted, "fitted_intervals_95": self.intervals,
                 "amplitude_dependence": self.amplitude,
                 "conventions": self.conventions, "numerical_retries": self.numerics,
@@ -380,6 +383,7 @@ def write_set_index(result, out_dir) -> Path:
         {"format": "arm-impedance-diagnosis-set/1",
          "conditions": {c: {"report": f"{r.out_dir.name if r.out_dir else c}/report.json",
                             "verdict": r.verdict, "named_effects": r.named,
+                            "indistinguishable": r.indistinguishable,
                             "fitted_parameters": r.fitted, "gap": r.gap}
                         for c, r in result.reports.items()}}), indent=2))
     _atomic_text(out / "report.md", "\n".join(lines))

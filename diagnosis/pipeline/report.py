@@ -43,6 +43,7 @@ def build(r) -> DiagnosisReport:
         pair_rows = [_row_in_units(row, rho) for row in pair_rows]
     return DiagnosisReport(
         verdict=r.verdict, named=r.named, summary=r.summary, amplitude=r.amplitude,
+        indistinguishable=list(getattr(r, "indistinguishable", [])),
         conventions=[f.to_dict() for f in r.findings], numerics=r.numerics,
         timing={"workers": r.workers,
                 "scheduler": None if r.scheduler is None else str(r.scheduler),

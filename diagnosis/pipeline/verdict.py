@@ -60,12 +60,22 @@ def run(r) -> None:
                     + f" and was run at {r.numerics[0]['rk4_step']:.3g} s (a numerical "
                     "failure, not a model mismatch).")
     mismatches = [f for f in r.findings if not f.name.startswith("declared") and not f.note]
+    # a corrected storage/clock finding is told beside the verdict on the gap, never
+    # instead of it (issue 21, item 7)
+    stored = [f for f in mismatches if getattr(f, "storage", False)]
+    mismatches = [f for f in mismatches if f not in stored]
+    if stored:
+        summary += (" Storage finding, corrected (it does not change the verdict): "
+                    + "; ".join(f.text() for f in stored) + ".")
     if mismatches:
         if verdict == VERDICT_NONE:
             verdict = VERDICT_CONVENTION
         summary = ("set-up/convention mismatch found and corrected: "
                    + "; ".join(f.text() for f in mismatches) + ". After correction: "
                    + summary)
+    r.indistinguishable = ties(chosen, r.singles, r.g0_held) if named else []
+    if r.indistinguishable:
+        summary += " " + tie_text(named, r.indistinguishable, chosen, r.singles, r.g0_held)
     r.verdict, r.named, r.chosen, r.after = verdict, named, chosen, after
     r.amplitude, r.summary = amplitude, summary
 
@@ -152,3 +162,34 @@ def pair_earns_second(pair: EffectFit, single: EffectFit, cfg: DiagnosisConfig) 
                 and pair.held_out_gap < cfg.pair_gain * single.held_out_gap
                 and held_drop > cfg.significance_gap
                 and not cat.below_detectability(second, pair.params[second]))
+
+
+#: another effect within this share of the held-out gap of the named one (5 points of
+#: reduction) cannot be told from it on these trials (issue 21, item 3)
+TIE_SHARE = 0.05
+
+
+def ties(chosen, singles, g0_held, tie_share: float = TIE_SHARE) -> list:
+    """Names of the nameable single effects, other than the named ones, whose held-out
+    gap reduction comes within ``tie_share`` (a fraction of the nominal held-out gap) of
+    the named fit's: on these trials they explain the gap as well. [] when none."""
+    if chosen is None:
+        return []
+    share = reduction(g0_held, chosen.held_out_gap)
+    return [f.effects[0] for f in singles
+            if f.nameable and len(f.effects) == 1 and f.effects[0] not in chosen.effects
+            and math.isfinite(reduction(g0_held, f.held_out_gap))
+            and reduction(g0_held, f.held_out_gap) >= share - tie_share]
+
+
+def tie_text(named, tied, chosen, singles, g0_held) -> str:
+    """The sentence of a tie: the shares and what experiment would separate them."""
+    shares = {f.effects[0]: 100 * reduction(g0_held, f.held_out_gap) for f in singles
+              if len(f.effects) == 1}
+    others = ", ".join(f"{n} ({shares.get(n, math.nan):.0f} %)" for n in tied)
+    return (f"Indistinguishable here: {others} closes the held-out gap within "
+            f"{100 * TIE_SHARE:.0f} points of {' + '.join(named)} "
+            f"({100 * reduction(g0_held, chosen.held_out_gap):.0f} %); these trials cannot "
+            "tell them apart. A perturbation with a wider band, a recorded reference "
+            "(an independent torque or angle sensor) or another amplitude would separate "
+            "them.")

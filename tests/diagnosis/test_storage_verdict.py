@@ -103,3 +103,108 @@ def test_numerical_retry_gives_up_after_the_last_rung(monkeypatch, make_linear_t
     plant = type("P", (), {"parameters": {"rk4_step": 1e-5}})()
     assert dsim.simulate_like(trial, None, {}, 200, plant=plant) is None
     np.testing.assert_allclose(steps, [1e-5] + [1e-5 / f for f in dsim.NUMERICAL_RETRY_FACTORS])
+
+
+def _float32_9(values):
+    """Values stored in single precision, then printed with ``%.9g`` (two roundings)."""
+    return np.array([float("%.9g" % v) for v in np.asarray(values, float).astype(np.float32)])
+
+
+def test_float32_t_printed_at_9_digits_is_within_its_storage_precision(make_linear_trial):
+    # issue 21 item 7: the float32 rounding and then the 9-digit one; at t = 10.013 s the
+    # stored 10.0129995 is 5.0e-7 s off, beyond half the float32 spacing (4.77e-7 s)
+    trial = make_linear_trial(n_samples=12000)
+    exact = np.arange(trial.n_samples) / trial.fs
+    stored = _float32_9(exact)
+    beyond = np.abs(stored - exact) - 0.5 * np.abs(np.spacing(exact.astype(np.float32)))
+    assert np.max(beyond) > 1e-8  # the double rounding is really there
+    (finding,) = check_time([_with_t(trial, stored)])
+    assert finding.note and finding.name == "t rounded", finding.evidence
+    assert "float32 printed at 9 significant digits" in finding.evidence
+
+
+def test_a_clock_off_beyond_the_double_rounding_is_still_found(make_linear_trial):
+    trial = make_linear_trial(n_samples=12000)
+    exact = np.arange(trial.n_samples) / trial.fs
+    stored = _float32_9(exact)
+    # a clock 3 us late at 7 s (several float32 steps), written by the same writer
+    stored[7000] = _float32_9([exact[7000] + 3e-6])[0]
+    (finding,) = check_time([_with_t(trial, stored)])
+    assert not finding.note and finding.name == "t off the grid"
+    assert "at sample 7000" in finding.evidence
+
+
+def test_every_column_float32_printed_at_9_digits_gives_no_significant_gap(tmp_path):
+    # issue 21 item 7: nothing withheld, every column (t too) float32 then %.9g in a CSV
+    pytest.importorskip("orchestrator")
+    from diagnosis import VERDICT_NONE, DiagnosisConfig, diagnose
+    from diagnosis.validation import SetSpec, make_set
+    folder = make_set(SetSpec("nominal", (), seeds=(41,), duration_s=9.0,
+                              resolution_level=1), tmp_path / "sets")
+    out = tmp_path / "f32_9"
+    out.mkdir()
+    for csv in sorted(folder.glob("*.csv")):
+        header = csv.read_text().splitlines()[0]
+        table = np.loadtxt(csv, delimiter=",", skiprows=1, ndmin=2)
+        rows = ["%.9g" % v for v in table.astype(np.float32).ravel()]
+        lines = [",".join(rows[i:i + table.shape[1]])
+                 for i in range(0, len(rows), table.shape[1])]
+        (out / csv.name).write_text("\n".join([header] + lines) + "\n")
+        meta = csv.with_suffix(".json")
+        (out / meta.name).write_text(meta.read_text())
+    report = diagnose(out, tmp_path / "report",
+                      config=DiagnosisConfig(effects=("gravity",), grid_points=3,
+                                             refine_iterations=0), progress=False, workers=1)
+    assert report.verdict == VERDICT_NONE, report.summary
+    assert "mismatch" not in report.summary
+    assert any(c["name"] == "t rounded" and c["note"] for c in report.conventions)
+
+
+def test_a_storage_finding_is_told_beside_the_verdict_never_instead(monkeypatch):
+    # a t off the grid is corrected (read on n / fs): the verdict stays the gap's
+    from types import SimpleNamespace
+
+    from diagnosis.config import VERDICT_NONE
+    from diagnosis.conventions import Finding
+    from diagnosis.pipeline import verdict as stage
+    finding = Finding("t off the grid", "trial_a", "t up to 3e-06 s from n/fs",
+                      storage=True)
+    r = SimpleNamespace(significant=False, singles=[], pairs=[], g0_held=0.0,
+                        config=None, experiment=SimpleNamespace(), nominal_all=None,
+                        trials=[], runner=SimpleNamespace(timings=[]), units=None,
+                        numerics=[], findings=[finding])
+    monkeypatch.setattr(stage, "amplitude_dependence",
+                        lambda residual, trials: {"amplitude_dependent": False})
+    stage.run(r)
+    assert r.verdict == VERDICT_NONE
+    assert r.summary.startswith("no significant gap")
+    assert "t off the grid" in r.summary and "does not change the verdict" in r.summary
+
+
+def test_an_effect_within_5_points_of_the_named_one_is_reported_as_a_tie():
+    # issue 21 item 3: the anti-alias filter case, channel_delay 90 %, sensor lag 86 %
+    from types import SimpleNamespace
+
+    from diagnosis.pipeline.verdict import tie_text, ties
+
+    def fit(name, share):
+        return SimpleNamespace(effects=(name,), nameable=True, held_out_gap=1.0 - share)
+    singles = [fit("channel_delay", 0.90), fit("torque_sensor_lag", 0.86),
+               fit("wobbling_mass", 0.40)]
+    assert ties(singles[0], singles, 1.0) == ["torque_sensor_lag"]
+    text = tie_text(["channel_delay"], ["torque_sensor_lag"], singles[0], singles, 1.0)
+    assert "torque_sensor_lag (86 %)" in text and "cannot tell them apart" in text
+    assert "wider band" in text
+    # 10 points apart: a winner, not a tie
+    singles[1] = fit("torque_sensor_lag", 0.80)
+    assert ties(singles[0], singles, 1.0) == []
+    assert ties(None, singles, 1.0) == []
+
+
+def test_report_json_has_indistinguishable_beside_named_effects(tmp_path):
+    from diagnosis.report import DiagnosisReport
+    rep = DiagnosisReport(verdict="effect", named=["channel_delay"], summary="", amplitude={},
+                          conventions=[], numerics=[], timing={}, fitted={}, ranking=[],
+                          pairs=[], gap={}, where={}, arm={}, split={}, config={},
+                          n_simulations=0, elapsed_s=0.0, trials=[])
+    assert rep.to_dict()["indistinguishable"] == []
