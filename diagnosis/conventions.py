@@ -125,12 +125,39 @@ def check_angles(trials) -> tuple[list, list]:
             "angles absolute", "theta, all trials",
             f"mean angle {np.round(mean_rad, 4).tolist()} rad equals the posture "
             f"{np.round(posture, 4).tolist()} rad while deviations are declared"))
+    ref_scale = _theta_ref_scale(trials, scale, findings)
     if not findings:
         return trials, findings
     offset = posture if absolute else 0.0
-    out = [_replace(t, scale={"theta": scale}, offset={"theta": offset},
-                    theta=t.theta * scale - offset) for t in trials]
+    out = []
+    for t in trials:
+        scales, offsets = {"theta": scale}, {"theta": offset}
+        arrays = {"theta": t.theta * scale - offset}
+        if t.theta_ref is not None:  # the reference is an angle stored like theta
+            scales["theta_ref"], offsets["theta_ref"] = ref_scale, offset
+            arrays["theta_ref"] = t.theta_ref * ref_scale - offset
+        out.append(_replace(t, scale=scales, offset=offsets, **arrays))
     return out, findings
+
+
+def _theta_ref_scale(trials, theta_scale: float, findings: list) -> float:
+    """Scale [rad per stored unit] of the trials' ``theta_ref``: that of ``theta``, unless
+    the reference alone is in degrees (its deviation beyond :data:`ANGLE_LIMIT_RAD` while
+    theta's is within it), which is a finding of its own (issue 22)."""
+    refs = [t.theta_ref for t in trials if t.theta_ref is not None]
+    if not refs:
+        return theta_scale
+    ref = np.vstack(refs)
+    spread = np.max(np.abs(ref - ref.mean(axis=0)), axis=0)
+    if theta_scale == 1.0 and np.any(spread > ANGLE_LIMIT_RAD) and \
+            np.all(np.radians(spread) < PLAUSIBLE_DEVIATION_RAD):
+        findings.append(Finding(
+            "theta_ref in degrees", "theta_ref, all trials",
+            f"largest deviation of the reference {np.round(spread, 3).tolist()} beyond the "
+            f"{ANGLE_LIMIT_RAD} rad any trial can have while theta's is within it: the "
+            f"reference is in degrees beside theta in radians; converted"))
+        return math.pi / 180.0
+    return theta_scale
 
 
 def check_time(trials) -> list:
