@@ -81,6 +81,8 @@ def test_limb_estimate_follows_the_declared_sampling():
 def test_one_joint_torque_trial_is_diagnosed(tmp_path):
     trials = [torque_trial(K=K1, B=B1, I=I1, duration_s=40.0, seed=s, name=f"tq{s}")
               for s in (1, 2)]
+    for t in trials:  # one limb: labelled (unlabelled recordings of one joint stay apart)
+        t.meta["condition"] = "limb"
     report = diagnose(_write(tmp_path / "in", trials), tmp_path / "out", workers=1,
                       progress=False)
     assert report.experiment["class"] == "RenderedImpedance"
