@@ -81,32 +81,20 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         for t in trials:
             request(t, scheduling)
     groups = split_conditions(trials)
-    from trialformat.grouping import describe, trial_sets
-    grouping = describe(trial_sets(trials))  # the rule estimate and figures follow too
     if len(groups) == 1:
         trials = next(iter(groups.values()))
-        report = run(DiagnosisRun(source=source, out_dir=out_dir, trials=trials,
-                                  **options)).report
-        report.grouping = grouping
-        return report
+        return run(DiagnosisRun(source=source, out_dir=out_dir, trials=trials,
+                                **options)).report
     from .pipeline.report import check_out_dir
     from .report import write_set_index
     if out_dir is not None:
         check_out_dir(out_dir, source)  # the index folder too holds nothing of the user's
-    import warnings
-
-    from trialformat.grouping import unique_file_names
-    folders, renamed = unique_file_names(list(groups), _safe)
-    for note in renamed:  # one name, one output (issue 22)
-        warnings.warn(f"report folders: {note}", stacklevel=2)
     reports = {}
-    for (condition, trials), folder in zip(groups.items(), folders):
-        sub = None if out_dir is None else Path(out_dir) / folder
+    for condition, trials in groups.items():
+        sub = None if out_dir is None else Path(out_dir) / _safe(condition)
         reports[condition] = run(DiagnosisRun(source=source, out_dir=sub, trials=trials,
                                               **options)).report
     result = DiagnosisSet(reports)
-    result.notes = renamed
-    result.grouping = grouping
     if out_dir is not None:
         result.out_dir = Path(out_dir)
         write_set_index(result, out_dir)
@@ -128,7 +116,6 @@ class DiagnosisSet:
     def __init__(self, reports: dict):
         self.reports = reports
         self.out_dir = None
-        self.notes = []  # output names made unique (issue 22)
 
     @property
     def verdict(self) -> str:

@@ -167,31 +167,16 @@ def check_signals(trial, path) -> None:
 
 
 def split_conditions(trials) -> dict:
-    """Trials grouped by the one grouping rule shared with ``estimate`` and ``figures``
-    (:func:`trialformat.grouping.trial_sets`: one set per ``condition`` label; unlabelled
-    trials together when one per perturbed joint and level or simulated here, else each
-    alone), each group checked to declare one set-up (:func:`check_consistent`); in the
-    order first met. A single unlabelled set has the key None.
-
-    Raises
-    ------
-    DiagnosisInputError
-        What the rule refuses (a non-string label, ...), naming the trials.
-    """
-    from trialformat.grouping import trial_sets
-    try:
-        sets = trial_sets(trials)
-    except tf.TrialFormatError as exc:
-        raise DiagnosisInputError(str(exc)) from None
-    if len(sets) == 1 and not sets[0].labelled:
-        groups = {None: sets[0].trials}
-    else:
-        groups = {}
-        for s in sets:  # an unlabelled recording named like a label keeps both
-            key = s.label
-            while key in groups:
-                key += " (unlabelled)" if not s.labelled else "'"
-            groups[key] = s.trials
+    """Trials grouped by their ``condition`` label (None: one group), each group checked
+    to declare one set-up (:func:`check_consistent`); in the order first met."""
+    groups: dict = {}
+    for t in trials:
+        groups.setdefault(t.meta.get("condition"), []).append(t)
+    if len(groups) > 1 and None in groups:
+        raise DiagnosisInputError(
+            f"trials {[t.name for t in groups[None]]} have no 'condition' label while "
+            f"others have one ({sorted(str(k) for k in groups if k is not None)}): label "
+            f"every trial or none")
     for group in groups.values():
         check_consistent(group)
     return groups

@@ -379,9 +379,6 @@ def write_set_index(result, out_dir) -> Path:
                      f"{'-' if red is None else _fmt(100 * red) + ' %'} | "
                      f"{_fmt(r.gap['nominal_all'])} ({measure_name(r.gap)}) |")
     lines += [""] + [f"- **{c}**: {r.summary}" for c, r in result.reports.items()] + [""]
-    lines += [f"Note: {n}." for n in getattr(result, "notes", [])]
-    if getattr(result, "grouping", None):
-        lines += ["", result.grouping, ""]
     _atomic_text(out / "report.json", json.dumps(_clean(
         {"format": "arm-impedance-diagnosis-set/1",
          "conditions": {c: {"report": f"{r.out_dir.name if r.out_dir else c}/report.json",

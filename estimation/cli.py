@@ -302,11 +302,8 @@ def lab_results(trials, options, truth_name="none", failures=None):
     appended to it as ``(label, message)`` and the others go on; without, it raises."""
     from .errors import EstimationError
     from .lab import analyse, estimation_units
-    from trialformat.grouping import describe, trial_sets
     results = []
-    units = estimation_units(trials, pool=options.pool)
-    print(describe(trial_sets(trials, pool=options.pool)), file=sys.stderr)
-    for unit in units:
+    for unit in estimation_units(trials, pool=options.pool):
         truth = _truth(truth_name, unit.trials[0].n_dof)
         try:
             results.append(analyse(unit, options, truth=truth))

@@ -348,40 +348,43 @@ def _group_key(trial):
 def estimation_units(trials, *, pool=False) -> list[Unit]:
     """Split trials into the sets estimated together (log-format.md, "condition").
 
-    The sets are those of the one grouping rule shared with ``figures`` and ``diagnose``
-    (:func:`trialformat.grouping.trial_sets`: one set per ``condition`` label; unlabelled
-    trials together when one per perturbed joint or simulated here, else each alone);
-    within a set, trials of another rate, declared set-up or perturbation level are
-    estimated apart (spectra are averaged only at one level).
-
-    Raises
-    ------
-    EstimationError
-        What the grouping rule refuses (a non-string label, unlabelled repeats of one joint
-        of a multi-joint set-up).
+    Trials group by n, fs, perturbation kind, declared set-up and level, and the
+    ``condition`` label. A labelled group (or any group with ``pool``) is one set. An
+    unlabelled group with at most one trial per perturbed joint is one set (the
+    decomposition's one trial per joint). Otherwise unlabelled recordings are separate:
+    one set each when a trial suffices alone (one joint, or all joints perturbed at once);
+    for several joints an EstimationError says which trials to label.
     """
-    from trialformat.errors import TrialFormatError
-    from trialformat.grouping import trial_sets
-    try:
-        sets = trial_sets(trials, pool=pool)
-    except TrialFormatError as exc:
-        raise EstimationError(str(exc)) from None
+    groups = {}
+    for t in trials:
+        groups.setdefault(_group_key(t), []).append(t)
     units = []
-    for one in sets:
-        groups = {}
-        for t in one.trials:
-            groups.setdefault(_group_key(t)[:-1], []).append(t)
-        for group in groups.values():
-            cond = condition_of(group[0])
-            label = one.label if one.labelled else ""
-            base = label or (cond.label if group[0].n_dof > 1 and _is_simulated(group[0])
-                             else "")
-            if one.labelled or pool:
-                why = (f"condition label {label!r}" if label else "pooled on request") + \
-                    f": {len(group)} trial(s) averaged"
-                units.append(Unit(base or "pooled", group, why))
-            else:
-                units.append(Unit(base or _joined(group), group, one.why))
+    for key, group in groups.items():
+        label = key[-1]
+        cond = condition_of(group[0])
+        base = label or (cond.label if group[0].n_dof > 1 and _is_simulated(group[0])
+                         else "")
+        by_joint = {}
+        for t in group:
+            by_joint.setdefault(t.perturbed_dof, []).append(t)
+        if label or pool:
+            why = (f"condition label {label!r}" if label else "pooled on request") + \
+                f": {len(group)} trial(s) averaged"
+            units.append(Unit(base or "pooled", group, why))
+        elif all(len(v) == 1 for v in by_joint.values()):
+            units.append(Unit(base or _joined(group), group,
+                              "one trial per perturbed joint" if len(group) > 1
+                              else "single recording"))
+        elif group[0].n_dof == 1 or all(k is None for k in by_joint):
+            units += [Unit(t.name, [t], "unlabelled recording, estimated alone")
+                      for t in group]
+        else:
+            dup = {k: [t.name for t in v] for k, v in by_joint.items() if len(v) > 1}
+            raise EstimationError(
+                f"several unlabelled recordings perturb the same joint ({dup}); they are "
+                f"separate recordings and are not averaged silently: give each set of one "
+                f"trial per joint its own 'condition' label in the metadata, or pool them "
+                f"on purpose (--pool)")
     return sorted(units, key=lambda u: u.label)
 
 

@@ -25,7 +25,6 @@ import json
 import os
 import re
 import shutil
-import sys
 from pathlib import Path
 
 import matplotlib
@@ -58,11 +57,8 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
     tmp = own_temp_dir(f".{out.name}.tmp", out.parent)  # a killed run's: removed next run
     try:
         names = []
-        from trialformat.grouping import unique_file_names
-        stems, renamed = unique_file_names([r.label for r in results], safe_name)
-        for note in renamed:  # one name, one output (issue 22)
-            print(f"note: figures: {note}", file=sys.stderr)
-        for r, stem in zip(results, stems):
+        for r in results:
+            stem = safe_name(r.label)
             names += write_frf(r, tmp / f"frf_{stem}")
             names.append(_save(bode(r), tmp / f"bode_{stem}.png"))
             from .pvlab import write_varying_files  # K, B, I over the scheduling variable
@@ -71,9 +67,7 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
         if any(getattr(r, "reflex", None) for r in results):
             from .reflex import write_reflex_tables
             names += write_reflex_tables(results, tmp)
-        doc = {"options": options or {}, "results": [
-            {**r.to_json(), "files": f"frf_{stem}.csv"} for r, stem in zip(results, stems)],
-            "notes": renamed}
+        doc = {"options": options or {}, "results": [r.to_json() for r in results]}
         names.append(_text(tmp / "results.json", json.dumps(doc, indent=1)))
         os.chmod(tmp, 0o777 & ~current_umask())
         replace_dir(tmp, out, kind="lab")
