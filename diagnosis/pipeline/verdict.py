@@ -52,7 +52,8 @@ def run(r) -> None:
         shown = _effects_in_units(best.params, r.units["tau_h"] / r.units["theta"])
     summary = verdict_text(verdict, named, chosen, r.g0_held, residual, amplitude,
                            best=best, best_params=shown)
-    summary += r.when.get("sentence", "") if r.when else ""  # pipeline.when
+    when = getattr(r, "when", None)  # pipeline.when (absent in callers without that stage)
+    summary += when.get("sentence", "") if when else ""
     if r.numerics:
         summary += (" Numerical: the plant's RK4 step failed on "
                     + ", ".join(f"{n['trial']} at {n['failed_rk4_step']:.3g} s"
