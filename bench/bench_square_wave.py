@@ -239,6 +239,28 @@ def summarise(rows):
     return res
 
 
+def basis_ceilings():
+    """VAF [%] of the least-squares best fit of the noise-free square wave (over the
+    evaluated 40 s) by fixed bases: the most any estimate in that basis can reach.
+    Chebyshev orders (varying.py's basis in time; it tries up to 12) and B-splines of
+    degree 0 (a windowed estimate held over its window), 1 and 3 with knots every h s."""
+    from scipy.interpolate import make_lsq_spline
+    t = grid()
+    phase = np.floor((t - PHASE_S) / (0.5 * PERIOD_S))
+    K = np.where((t >= PHASE_S) & (np.mod(phase, 2) == 1), 2 * K_NOM, 0.5 * K_NOM)
+    u = 2 * (t - t[0]) / (t[-1] - t[0]) - 1
+    out = {"chebyshev_order": {}, "bspline": {}}
+    for o in (6, 12, 20, 40, 80):
+        V = np.polynomial.chebyshev.chebvander(u, o)
+        out["chebyshev_order"][str(o)] = vaf(V @ np.linalg.lstsq(V, K, rcond=None)[0], K)
+    for h in (1.0, 0.5, 0.25):
+        for k in (0, 1, 3):
+            inner = np.arange(t[0] + h, t[-1] - h / 2, h)
+            knots = np.r_[[t[0]] * (k + 1), inner, [t[-1] + 1e-9] * (k + 1)]
+            out["bspline"][f"h={h:g} s, degree {k}"] = vaf(make_lsq_spline(t, K, knots, k=k)(t), K)
+    return out
+
+
 def table(res, runs, snr_db):
     def f(x, fmt):
         return "-" if x is None else format(x, fmt)
@@ -284,6 +306,10 @@ def main(argv=None):
         rows = list(tqdm(ex.map(one_run, jobs), total=len(jobs), desc="square wave"))
     res = summarise(rows)
     print(table(res, args.runs, args.snr_db))
+    ceil = basis_ceilings()
+    print("\nNoise-free ceiling of fixed bases (VAF % of the best fit of the true K(t)): "
+          + "; ".join(f"Chebyshev order {o}: {v:.1f}" for o, v in ceil["chebyshev_order"].items())
+          + "; " + "; ".join(f"B-spline {k}: {v:.1f}" for k, v in ceil["bspline"].items()))
     doc = {"bench": "square_wave", "runs": args.runs, "seed": args.seed,
            "snr_db": args.snr_db, "wall_s": time.time() - t0,
            "truth": {"K_low": 0.5 * K_NOM, "K_high": 2 * K_NOM, "period_s": PERIOD_S,
@@ -294,7 +320,7 @@ def main(argv=None):
                      "perturbation": "Gaussian, flat to 40 Hz, RMS 0.02 rad",
                      "noise": f"white on the torque, variance 10^(-{args.snr_db:g}/10) "
                               f"of the noise-free torque's"},
-           "methods": res, "published": PUBLISHED}
+           "methods": res, "basis_ceilings_vaf_pct": ceil, "published": PUBLISHED}
     write_results("square_wave", doc)
 
 
