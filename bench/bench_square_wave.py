@@ -33,7 +33,8 @@ each switch (searched within a quarter period either side), of the mean-over-run
 run's own; CPU s per run (process time of the tracker alone, the simulation apart).
 
 Run from the repository root: ``nice python3 bench/bench_square_wave.py [--runs 100]``
-(2 worker processes; about 10 s of CPU per run, mostly the simulation). Prints a markdown
+(2 worker processes; 100 runs took 18 min wall on the shared 2-core machine, mostly
+the simulation; ``--runs 4`` for a quick check). Prints a markdown
 table and writes bench/results/square_wave.json.
 """
 
