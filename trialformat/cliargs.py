@@ -91,4 +91,4 @@ def reader_notes(caught) -> list:
             lines.append(f"{file}:{names[0]}: {text}")
         else:
             lines.append(f"{file} ({', '.join(names)}): {text}")
-    return [f"note: {printable(line)}" for line in lines]
+    return [f"note: {printable(line, lines=True)}" for line in lines]

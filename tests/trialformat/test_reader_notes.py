@@ -30,3 +30,30 @@ def test_libraries_deprecations_are_not_the_users_and_control_characters_are_esc
                                  ("later", FutureWarning),
                                  ("plain \x1b[31mred", UserWarning)))
     assert len(lines) == 1 and "\x1b" not in lines[0] and lines[0].startswith("note: plain")
+
+
+def test_a_message_of_several_problems_keeps_its_lines():
+    """'1 problem(s):\\n  - ...' was printed with a literal backslash-n."""
+    from trialformat.csvtable import printable
+    text = "plant.fmu breaks the contract, 2 problem(s):\n  - a\x1b[2J\n  - b"
+    assert printable(text, lines=True) == ("plant.fmu breaks the contract, 2 problem(s):"
+                                           "\n  - a\\x1b[2J\n  - b")
+    assert "\n" not in printable(text)
+
+
+def test_cli_error_of_several_problems_prints_one_per_line(monkeypatch, capsys):
+    from orchestrator import cli
+
+    def fails(args):
+        raise ValueError("x.fmu breaks the plant contract, 2 problem(s):\n  - p1\n  - p2")
+
+    parser = cli.build_parser()
+    real = parser.parse_args
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    monkeypatch.setattr(parser, "parse_args",
+                        lambda argv=None: real(argv).__class__(**{**vars(real(argv)),
+                                                                  "func": fails}))
+    assert cli.main(["simulate", "--out", "unused"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[-3:] == ["armimp simulate: error: x.fmu breaks the plant contract, "
+                        "2 problem(s):", "  - p1", "  - p2"]
