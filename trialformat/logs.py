@@ -426,6 +426,7 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
         the 1-based data row, column or key.
     """
     from .matlab import read_trial_mat, split_variable
+    path = mat_of_stem(path)
     if split_variable(path)[0].suffix.lower() == ".mat":
         return read_trial_mat(path, min_samples=min_samples)
     stem = trial_stem(path)
@@ -439,6 +440,24 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
     header, delimiter = csvtable.read_header(csv_path)
     arrays = _columns(csv_path, header, delimiter, meta, filled)
     return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples)
+
+
+def mat_of_stem(path: str | os.PathLike) -> str | os.PathLike:
+    """``NAME.mat`` for a stem ``NAME`` that names no file, CSV or JSON but a ``.mat``
+    (``NAME:VAR`` too, for ``NAME.mat:VAR``); else ``path`` unchanged. CSV trials are named
+    by their stem, so a ``.mat`` is too."""
+    text = str(path)
+    if Path(text).exists() or text.lower().endswith(".mat") or ".mat:" in text.lower():
+        return path
+    head, sep, var = text.rpartition(":")
+    if sep and head and var and "/" not in var and "\\" not in var \
+            and Path(head + ".mat").is_file() and not Path(head).exists():
+        return f"{head}.mat:{var}"
+    stem = Path(text)
+    if any(with_ending(stem, e).exists() for e in (".csv", ".csv.gz", ".json")):
+        return path
+    mat = with_ending(stem, ".mat")
+    return mat if mat.is_file() else path
 
 
 def _data_file(path: Path, stem: Path) -> Path:
@@ -511,7 +530,7 @@ def read_trials(source, *, min_samples: int = MIN_SAMPLES) -> list[Trial]:
             raise TrialFormatError("no trial given (empty list of paths)")
     from .matlab import read_trials_mat, split_variable
     trials, origin = [], []
-    for p in paths:
+    for p in map(mat_of_stem, paths):
         if split_variable(p)[0].suffix.lower() == ".mat":
             got = read_trials_mat(p, min_samples=min_samples)
         else:

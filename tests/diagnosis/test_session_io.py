@@ -4,6 +4,7 @@ output, in the diagnosis."""
 import dataclasses
 
 import numpy as np
+import pytest
 
 from diagnosis.conventions import check_angles
 from estimation.synthetic import position_trial
@@ -30,3 +31,27 @@ def test_theta_ref_in_degrees_beside_theta_in_radians_is_noticed():
     assert "theta_ref in degrees" in names, names
     np.testing.assert_allclose(out[0].theta_ref, t.theta_ref, atol=1e-12)
     np.testing.assert_allclose(out[0].theta, t.theta, atol=1e-12)
+
+
+def test_diagnose_reader_says_a_repeated_note_once(tmp_path):
+    """200 files lacking one key gave 200 identical notes; now one, with the count."""
+    import json
+
+    import pandas as pd
+
+    import trialformat as tf
+    from diagnosis.inputs import load_trials
+    rng = np.random.default_rng(3)
+    n = 9000
+    for i in range(3):
+        cols = {"t": np.arange(n) / 1000.0, "theta[1]": rng.standard_normal(n),
+                "tau_h[1]": rng.standard_normal(n)}
+        pd.DataFrame(cols).to_csv(tmp_path / f"r{i}.csv", index=False)
+        meta = tf.default_metadata(1)
+        meta.update(perturbation={"kind": "position"})
+        meta.pop("friction")
+        (tmp_path / f"r{i}.json").write_text(json.dumps(meta))
+    with pytest.warns(UserWarning) as record:
+        load_trials(tmp_path)
+    said = [str(w.message) for w in record if "metadata keys absent" in str(w.message)]
+    assert len(said) == 1 and said[0].startswith("3 files (r0.csv, r1.csv, r2.csv): ")

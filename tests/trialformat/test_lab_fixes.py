@@ -291,3 +291,15 @@ def test_absent_fs_is_called_absent_when_t_disagrees(tmp_path):
 
 def test_three_joint_reference_posture_has_three_angles():
     assert len(tf.default_metadata(3)["posture_deg"]) == 3
+
+
+def test_a_mat_named_by_its_stem_reads_like_a_csv_stem(tmp_path):
+    """``estimate experimental_data`` said "no such file" where ``NAME`` of a CSV works."""
+    trial = tf.read_trial(_write(tmp_path / "w", _cols(1000.0, 9), 1000.0))
+    tf.write_trial_mat(tmp_path / "m.mat", trial)
+    by_stem = tf.read_trials(str(tmp_path / "m"))
+    assert len(by_stem) == 1
+    np.testing.assert_array_equal(by_stem[0].tau_h, trial.tau_h)
+    assert tf.read_trial(tmp_path / "m").n_samples == trial.n_samples
+    with pytest.raises(TrialFormatError, match="no such file or folder"):
+        tf.read_trial(tmp_path / "absent")

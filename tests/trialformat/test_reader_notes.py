@@ -57,3 +57,14 @@ def test_cli_error_of_several_problems_prints_one_per_line(monkeypatch, capsys):
     err = capsys.readouterr().err.splitlines()
     assert err[-3:] == ["armimp simulate: error: x.fmu breaks the plant contract, "
                         "2 problem(s):", "  - p1", "  - p2"]
+
+
+def test_the_same_note_on_many_files_is_said_once_with_the_count():
+    """200 files lacking one key gave 200 identical notes."""
+    text = "metadata keys absent, filled from the documented 1-joint defaults: friction"
+    lines = reader_notes(_caught(*[(f"r{i}.csv: {text}", UserWarning) for i in range(200)],
+                                 ("r7.csv: few segments", UserWarning),
+                                 ("a.csv: once", UserWarning), ("b.csv: once", UserWarning)))
+    assert lines == [f"note: 200 files (r0.csv, r1.csv, r2.csv, ...): {text}",
+                     "note: r7.csv: few segments", "note: a.csv: once", "note: b.csv: once"]
+
