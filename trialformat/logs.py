@@ -715,9 +715,16 @@ def _columns(csv_path: Path, header: list[str], delimiter: str, meta: dict,
     present = set(header)
     missing = [c for c in required_columns(meta) if c not in present]
     if missing:
+        hint = ""
+        kind = (meta.get("perturbation") or {}).get("kind")
+        if kind != "position" and any(h.startswith("theta_ref[") for h in present) and \
+                not any(c.startswith("theta_ref") for c in missing):
+            hint = ("; the file has theta_ref: if the joint was perturbed by a position "
+                    "servo, declare \"perturbation\": {\"kind\": \"position\"} (then t, "
+                    "theta and tau_h suffice)")
         raise TrialFormatError(f"{csv_path}: missing columns for {said}: "
                                f"{', '.join(missing)} (header: "
-                               f"{csvtable.printable(', '.join(header))[:500]})")
+                               f"{csvtable.printable(', '.join(header))[:500]}){hint}")
     known = {f"{s}[{j}]" for s in SIGNALS + ("theta_ref",) for j in range(1, n + 1)} | {"t"}
     wanted = [h for h in header if h in known]
     dup = sorted({h for h in wanted if wanted.count(h) > 1})

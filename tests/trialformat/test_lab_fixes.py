@@ -303,3 +303,12 @@ def test_a_mat_named_by_its_stem_reads_like_a_csv_stem(tmp_path):
     assert tf.read_trial(tmp_path / "m").n_samples == trial.n_samples
     with pytest.raises(TrialFormatError, match="no such file or folder"):
         tf.read_trial(tmp_path / "absent")
+
+
+def test_theta_ref_without_a_perturbation_kind_suggests_position(tmp_path):
+    cols = {k: v for k, v in _cols(1000.0, 9).items() if k in ("t", "theta[1]", "tau_h[1]")}
+    cols["theta_ref[1]"] = cols["theta[1]"]
+    path = _write(tmp_path / "w", cols, 1000.0)
+    with pytest.raises(TrialFormatError, match=r"missing columns .*tau_delta\[1\].*declare "
+                       r"\"perturbation\": \{\"kind\": \"position\"\}"):
+        tf.read_trial(path)
