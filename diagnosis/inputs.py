@@ -146,7 +146,7 @@ def check_signals(trial, path) -> None:
             continue
         x = np.asarray(x, dtype=float).reshape(len(x), -1)
         for j in range(x.shape[1]):
-            if not x.shape[0]:
+            if not x.shape[0] or _held_reference(trial, s, j):
                 continue
             if np.all(x[:, j] == x[0, j]):
                 raise DiagnosisInputError(
@@ -200,6 +200,13 @@ def check_consistent(trials) -> None:
                     f"trial {trial.name!r} declares {key}={json.dumps(b, sort_keys=True)} but "
                     f"trial {first.name!r} declares {key}={json.dumps(a, sort_keys=True)}: "
                     f"one diagnosis takes trials of one declared set-up")
+
+
+def _held_reference(trial, signal: str, j: int) -> bool:
+    """A servo reference of a joint the trial does not perturb: held (constant, or absent
+    from the file and read as 0, log-format.md), so not a channel to refuse."""
+    k = getattr(trial, "perturbed_dof", None)
+    return signal == "theta_ref" and k is not None and j != k - 1
 
 
 def _say_notes(caught) -> None:

@@ -55,3 +55,23 @@ def test_diagnose_reader_says_a_repeated_note_once(tmp_path):
         load_trials(tmp_path)
     said = [str(w.message) for w in record if "metadata keys absent" in str(w.message)]
     assert len(said) == 1 and said[0].startswith("3 files (r0.csv, r1.csv, r2.csv): ")
+
+
+def test_a_held_joints_absent_reference_is_not_refused_as_constant():
+    """Two-joint position trials with theta_ref only for the perturbed joint (as
+    log-format.md describes) were refused: "theta_ref[2] is constant (0 rad)"."""
+    import trialformat as tf
+    from diagnosis.errors import DiagnosisInputError
+    from diagnosis.inputs import check_signals
+    rng = np.random.default_rng(0)
+    n = 2000
+    meta = tf.default_metadata(2)
+    meta.update(perturbation={"kind": "position"}, perturbed_dof=1)
+    ref = np.column_stack([rng.standard_normal(n), np.zeros(n)])
+    trial = tf.Trial(meta=meta, name="p1", t=np.arange(n) / 1000.0,
+                     theta=rng.standard_normal((n, 2)), tau_h=rng.standard_normal((n, 2)),
+                     theta_ref=ref)
+    check_signals(trial, "p1.csv")
+    trial.theta_ref = ref[:, ::-1].copy()  # the perturbed joint's reference constant
+    with pytest.raises(DiagnosisInputError, match=r"theta_ref\[1\] is constant"):
+        check_signals(trial, "p1.csv")
