@@ -75,3 +75,23 @@ def test_a_held_joints_absent_reference_is_not_refused_as_constant():
     trial.theta_ref = ref[:, ::-1].copy()  # the perturbed joint's reference constant
     with pytest.raises(DiagnosisInputError, match=r"theta_ref\[1\] is constant"):
         check_signals(trial, "p1.csv")
+
+
+def test_plant_choice_on_position_trials_is_said_not_used(monkeypatch):
+    """--plant modelica / ARMEXO_PLANT=modelica with position trials was ignored silently."""
+    from types import SimpleNamespace
+
+    from diagnosis.pipeline.conventions import check_plant_options
+    from diagnosis.pipeline.report import simulated_by
+    r = SimpleNamespace(experiment=SimpleNamespace(uses_plant=False, kind="position"),
+                        trials=[SimpleNamespace(name="relaxed_1")], plant=None, rk4_step=None)
+    monkeypatch.delenv("ARMEXO_PLANT", raising=False)
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_plant_options(r)  # nothing chosen: nothing said
+    monkeypatch.setenv("ARMEXO_PLANT", "modelica")
+    with pytest.warns(UserWarning, match=r"ARMEXO_PLANT = modelica is not used: trials "
+                      r"relaxed_1 are position experiments, re-simulated by the limb model"):
+        check_plant_options(r)
+    assert simulated_by(r).startswith("diagnosis.limb")
