@@ -68,15 +68,14 @@ def load_trials(source, *, min_samples: int = tf.MIN_SAMPLES,
     """
     from estimation.io import read_trial
     trials = []
-    read = []
+    read, notes = [], []
     for path in trial_paths(source):
         n_before = len(read)
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 read.append(read_trial(path, min_samples=min_samples))
-            for w in caught:  # a file read whole: its warnings are the user's to see
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            notes += caught  # a file read whole: its warnings are the user's to see
         except (tf.TrialFormatError, ValueError) as exc:
             from .nldat import read_nldat_trials
             found = read_nldat_trials(path, min_samples=min_samples) \
@@ -87,6 +86,7 @@ def load_trials(source, *, min_samples: int = tf.MIN_SAMPLES,
         for trial in read[n_before:]:
             check_signals(trial, path)
             trial._source = source_label(trial, path)
+    _say_notes(notes)
     for trial in read:
         for key in HIDDEN_KEYS:
             trial.meta.pop(key, None)
@@ -146,7 +146,7 @@ def check_signals(trial, path) -> None:
             continue
         x = np.asarray(x, dtype=float).reshape(len(x), -1)
         for j in range(x.shape[1]):
-            if not x.shape[0]:
+            if not x.shape[0] or _held_reference(trial, s, j):
                 continue
             if np.all(x[:, j] == x[0, j]):
                 raise DiagnosisInputError(
@@ -200,3 +200,24 @@ def check_consistent(trials) -> None:
                     f"trial {trial.name!r} declares {key}={json.dumps(b, sort_keys=True)} but "
                     f"trial {first.name!r} declares {key}={json.dumps(a, sort_keys=True)}: "
                     f"one diagnosis takes trials of one declared set-up")
+
+
+def _held_reference(trial, signal: str, j: int) -> bool:
+    """A servo reference of a joint the trial does not perturb: held (constant, or absent
+    from the file and read as 0, log-format.md), so not a channel to refuse."""
+    k = getattr(trial, "perturbed_dof", None)
+    return signal == "theta_ref" and k is not None and j != k - 1
+
+
+def _say_notes(caught) -> None:
+    """Re-issue the readers' warnings, one per text: the same note on many files is said
+    once with their count (trialformat.cliargs.merged_notes)."""
+    from trialformat.cliargs import merged_notes
+    kept = [w for w in caught if not issubclass(w.category, (DeprecationWarning, FutureWarning))]
+    category = {str(w.message): w.category for w in kept}
+    first = {str(w.message): w for w in kept}
+    for text in merged_notes(list(category)):
+        w = first.get(text)
+        warnings.warn_explicit(text, w.category if w else UserWarning,
+                               w.filename if w else __file__, w.lineno if w else 0)
+

@@ -532,5 +532,5 @@ def main(argv=None) -> int:
         return args.func(args)
     except (ValueError, OSError, KeyError) as exc:
         print(f"python -m estimation {args.command}: error: "
-              f"{tf.csvtable.printable(str(exc))}", file=sys.stderr)
+              f"{tf.csvtable.printable(str(exc), lines=True)}", file=sys.stderr)
         return 1

@@ -57,7 +57,7 @@ def main(argv=None) -> int:
         # escaped: a file's bytes (a binary header, escape sequences) never reach the
         # terminal raw
         from trialformat.csvtable import printable
-        print(f"armimp {args.command}: error: {printable(str(exc))}", file=sys.stderr)
+        print(f"armimp {args.command}: error: {printable(str(exc), lines=True)}", file=sys.stderr)
         return 1
 
 
@@ -70,7 +70,7 @@ def _plain_warnings() -> None:
         if issubclass(category, (DeprecationWarning, FutureWarning)):
             return  # a library's notice to its own callers (mat-io on pandas), not the user's
         from trialformat.csvtable import printable
-        print(f"note: {printable(str(message))}", file=sys.stderr)
+        print(f"note: {printable(str(message), lines=True)}", file=sys.stderr)
 
     warnings.showwarning = show
 

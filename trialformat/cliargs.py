@@ -72,23 +72,45 @@ def reader_notes(caught) -> list:
     catch_warnings(record=True)``): libraries' deprecation notices to their own callers
     (mat-io on pandas) dropped; one note per file for the same note on several of its
     recordings (``FILE.mat:z_df: ...``, ``FILE.mat:z_pf: ...`` become ``FILE.mat (z_df,
-    z_pf): ...``); control characters escaped."""
+    z_pf): ...``); one note, with the count, for the same note on several files;
+    control characters escaped."""
     from .csvtable import printable
 
-    merged: dict = {}
-    for w in caught:
-        if issubclass(w.category, (DeprecationWarning, FutureWarning)):
-            continue
-        text = str(w.message)
+    texts = [str(w.message) for w in caught
+             if not issubclass(w.category, (DeprecationWarning, FutureWarning))]
+    return [f"note: {printable(line, lines=True)}" for line in merged_notes(texts)]
+
+
+_FILE_NOTE = re.compile(r"^(?P<file>[^\n:]+?): (?P<text>.*)$", re.S)
+
+
+def merged_notes(texts) -> list:
+    """Notes (``"FILE:VAR: text"``, ``"FILE: text"``, plain) with repeats merged, in first
+    order: a text said for several variables of one file once per file, a text said for
+    several files once with their count and the first names."""
+    per_file: dict = {}
+    for text in texts:
         m = _NAMED.match(text)
         key = (m["file"], m["text"]) if m else (None, text)
-        merged.setdefault(key, []).append(m["name"] if m else None)
+        per_file.setdefault(key, []).append(m["name"] if m else None)
     lines = []
-    for (file, text), names in merged.items():
+    for (file, text), names in per_file.items():
         if file is None:
             lines.append(text)
         elif len(names) == 1:
             lines.append(f"{file}:{names[0]}: {text}")
         else:
             lines.append(f"{file} ({', '.join(names)}): {text}")
-    return [f"note: {printable(line)}" for line in lines]
+    per_text: dict = {}
+    for line in lines:
+        m = _FILE_NOTE.match(line)
+        key = m["text"] if m and " " not in m["file"].strip("()") else line
+        per_text.setdefault(key, []).append(m["file"] if key != line else None)
+    out = []
+    for text, files in per_text.items():
+        if len(files) < 3 or None in files:
+            out += [f"{f}: {text}" if f else text for f in files]
+        else:
+            shown = ", ".join(files[:3]) + (", ..." if len(files) > 3 else "")
+            out.append(f"{len(files)} files ({shown}): {text}")
+    return list(dict.fromkeys(out))

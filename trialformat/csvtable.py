@@ -40,10 +40,13 @@ def open_text(path: Path):
     return open(path, encoding="utf-8-sig", errors="replace", newline="")
 
 
-def printable(text: str) -> str:
+def printable(text: str, *, lines: bool = False) -> str:
     """``text`` with control and other non-printable characters escaped (``\\x1b``,
     ``\\u200b``), so a binary or escape-sequence header is never echoed raw to a
-    terminal."""
+    terminal. ``lines=True`` keeps line breaks (a message of several problems, one per
+    line), escaping the rest of each line."""
+    if lines:
+        return "\n".join(printable(part) for part in text.split("\n"))
     return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii")
                    for c in text)
 

@@ -156,7 +156,8 @@ def default_metadata(n_dof: int = 2) -> dict:
         "fs": 1.0 / r["timing"]["control_period_s"],
         "n_dof": n_dof,
         "perturbed_dof": 1,
-        "posture_deg": r["human_arm"]["posture_deg"],
+        "posture_deg": ref.reference("3dof" if n_dof == 3 else "2dof")["human_arm"][
+            "posture_deg"],
         "perturbation": {"level": 3, "peak": ref.perturbation_peak(3), "seed": 0,
                          "cutoff_hz": r["perturbation"]["cutoff_hz"],
                          "order": r["perturbation"]["butterworth_order"]},
@@ -425,6 +426,7 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
         the 1-based data row, column or key.
     """
     from .matlab import read_trial_mat, split_variable
+    path = mat_of_stem(path)
     if split_variable(path)[0].suffix.lower() == ".mat":
         return read_trial_mat(path, min_samples=min_samples)
     stem = trial_stem(path)
@@ -438,6 +440,24 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
     header, delimiter = csvtable.read_header(csv_path)
     arrays = _columns(csv_path, header, delimiter, meta, filled)
     return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples)
+
+
+def mat_of_stem(path: str | os.PathLike) -> str | os.PathLike:
+    """``NAME.mat`` for a stem ``NAME`` that names no file, CSV or JSON but a ``.mat``
+    (``NAME:VAR`` too, for ``NAME.mat:VAR``); else ``path`` unchanged. CSV trials are named
+    by their stem, so a ``.mat`` is too."""
+    text = str(path)
+    if Path(text).exists() or text.lower().endswith(".mat") or ".mat:" in text.lower():
+        return path
+    head, sep, var = text.rpartition(":")
+    if sep and head and var and "/" not in var and "\\" not in var \
+            and Path(head + ".mat").is_file() and not Path(head).exists():
+        return f"{head}.mat:{var}"
+    stem = Path(text)
+    if any(with_ending(stem, e).exists() for e in (".csv", ".csv.gz", ".json")):
+        return path
+    mat = with_ending(stem, ".mat")
+    return mat if mat.is_file() else path
 
 
 def _data_file(path: Path, stem: Path) -> Path:
@@ -510,7 +530,7 @@ def read_trials(source, *, min_samples: int = MIN_SAMPLES) -> list[Trial]:
             raise TrialFormatError("no trial given (empty list of paths)")
     from .matlab import read_trials_mat, split_variable
     trials, origin = [], []
-    for p in paths:
+    for p in map(mat_of_stem, paths):
         if split_variable(p)[0].suffix.lower() == ".mat":
             got = read_trials_mat(p, min_samples=min_samples)
         else:
@@ -593,6 +613,7 @@ def complete_metadata(meta: dict, where) -> list[str]:
             or fs <= 0):
         raise TrialFormatError(f"{where}: key 'fs' must be a positive number, got "
                                f"{_num(fs) if isinstance(fs, float) else repr(fs)}")
+    _check_posture(meta, n_dof, "posture_deg" in filled, where)
     for (group, key), allowed in _CHOICES.items():
         holder = meta if group is None else meta.get(group)
         if isinstance(holder, dict) and key in holder and holder[key] not in allowed:
@@ -605,6 +626,34 @@ def complete_metadata(meta: dict, where) -> list[str]:
         warnings.warn(f"{Path(str(where)).name}: unknown format {meta.get('format')!r} "
                       f"(this reader knows {FORMAT!r}); read as {FORMAT}", stacklevel=3)
     return filled
+
+
+def _check_posture(meta: dict, n_dof: int, filled: bool, where) -> None:
+    """Refuse a ``posture_deg`` that is not n_dof finite numbers (degrees), naming it.
+
+    With ``"angles": "absolute"`` the posture is what turns theta into a deviation, so
+    it must be declared, not filled from the reference.
+    """
+    value = meta.get("posture_deg")
+    if value is None or filled:
+        if meta.get("angles") == "absolute":
+            raise TrialFormatError(
+                f"{where}: key 'posture_deg' is required with \"angles\": \"absolute\" "
+                f"(the posture theta is measured about, {n_dof} number(s) in degrees, e.g. "
+                f"[{', '.join(['0'] * n_dof)}]); or drop \"angles\" if theta is already "
+                f"the deviation from the posture")
+        if value is None:
+            return
+    flat = np.asarray(value, dtype=object).ravel()  # .mat readers give arrays
+    ok = flat.size == n_dof and all(
+        isinstance(v, (int, float, np.number)) and not isinstance(v, (bool, np.bool_))
+        and np.isfinite(v) for v in flat)
+    if not ok:
+        raise TrialFormatError(
+            f"{where}: key 'posture_deg' must be a list of {n_dof} finite number(s) in "
+            f"degrees, one per joint (n_dof={n_dof}), got {_json_type(value)} "
+            f"{_short(value)}")
+    meta["posture_deg"] = [float(v) for v in flat]
 
 
 def _json_type(value) -> str:
@@ -666,9 +715,16 @@ def _columns(csv_path: Path, header: list[str], delimiter: str, meta: dict,
     present = set(header)
     missing = [c for c in required_columns(meta) if c not in present]
     if missing:
+        hint = ""
+        kind = (meta.get("perturbation") or {}).get("kind")
+        if kind != "position" and any(h.startswith("theta_ref[") for h in present) and \
+                not any(c.startswith("theta_ref") for c in missing):
+            hint = ("; the file has theta_ref: if the joint was perturbed by a position "
+                    "servo, declare \"perturbation\": {\"kind\": \"position\"} (then t, "
+                    "theta and tau_h suffice)")
         raise TrialFormatError(f"{csv_path}: missing columns for {said}: "
                                f"{', '.join(missing)} (header: "
-                               f"{csvtable.printable(', '.join(header))[:500]})")
+                               f"{csvtable.printable(', '.join(header))[:500]}){hint}")
     known = {f"{s}[{j}]" for s in SIGNALS + ("theta_ref",) for j in range(1, n + 1)} | {"t"}
     wanted = [h for h in header if h in known]
     dup = sorted({h for h in wanted if wanted.count(h) > 1})
@@ -731,11 +787,11 @@ def check_trial(trial: Trial, where, *, min_samples: int = MIN_SAMPLES) -> None:
             row, col = np.argwhere(bad)[0]
             raise TrialFormatError(f"{where}: non-finite or blank value {_num(arr[row, col])} in "
                                    f"column '{s}[{col + 1}]' at data row {row + 1}")
-    _check_time(t, fs, where)
+    _check_time(t, fs, where, "fs" in (trial.filled_defaults or []))
     _check_perturbation(trial, where)
 
 
-def _check_time(t: np.ndarray, fs: float, where) -> None:
+def _check_time(t: np.ndarray, fs: float, where, fs_filled: bool = False) -> None:
     """Refuse a ``t`` that is not ``arange(N) / fs`` at its printed resolution.
 
     Each value may be off ``n/fs`` by half its own last printed digit (ties and float
@@ -761,10 +817,10 @@ def _check_time(t: np.ndarray, fs: float, where) -> None:
     off &= err > 0.5 * res * (1 + 1e-6) + 4 * np.spacing(np.abs(t))
     if not off.any():
         return
-    _time_fault(t, grid, res, off, fs, where)
+    _time_fault(t, grid, res, off, fs, where, fs_filled)
 
 
-def _time_fault(t, grid, res, off, fs, where) -> None:
+def _time_fault(t, grid, res, off, fs, where, fs_filled=False) -> None:
     """Raise the message that says what is wrong with a refused ``t``."""
     dt = np.diff(t)
     step = (t[-1] - t[0]) / (t.size - 1)
@@ -775,8 +831,11 @@ def _time_fault(t, grid, res, off, fs, where) -> None:
         raise TrialFormatError(f"{where}: column 't' is not increasing at data row {row} "
                                f"(t={_num(t[row - 1])} after {_num(t[row - 2])})")
     if abs(step * fs - 1) > 1e-3:
-        raise TrialFormatError(f"{where}: key 'fs'={_num(fs)} disagrees with column 't' "
-                               f"(mean step {_num(step)} s, i.e. fs={_num(1.0 / step)})")
+        key = (f"key 'fs' is absent and its reference value {_num(fs)} disagrees with "
+               f"column 't'" if fs_filled else
+               f"key 'fs'={_num(fs)} disagrees with column 't'")
+        raise TrialFormatError(f"{where}: {key} (mean step {_num(step)} s, i.e. "
+                               f"fs={_num(1.0 / step)}){'; declare fs' if fs_filled else ''}")
     row = int(np.argmax(off)) + 1
     raise TrialFormatError(f"{where}: column 't' is not uniform at data row {row} "
                            f"(t={_num(t[row - 1])}, expected {_num(grid[row - 1])} at "

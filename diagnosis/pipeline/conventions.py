@@ -60,6 +60,14 @@ def check_plant_options(r) -> None:
             raise DiagnosisInputError(
                 f"{option} {shown}: trials {names} are {r.experiment.kind} experiments, "
                 f"re-simulated by {what}, not by a plant FMU; leave {option} out")
+    import os
+    import warnings
+
+    from orchestrator.trial import PLANT_ENV
+    if os.environ.get(PLANT_ENV):  # --plant, or the variable a lab exported for all runs
+        warnings.warn(f"--plant / ${PLANT_ENV} = {os.environ[PLANT_ENV]} is not used: trials "
+                      f"{names} are {r.experiment.kind} experiments, re-simulated by {what}",
+                      stacklevel=2)
 
 
 def check_rk4_divides(r) -> None:

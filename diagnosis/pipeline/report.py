@@ -63,11 +63,25 @@ def build(r) -> DiagnosisReport:
         config=r.config.to_dict(),
         n_simulations=n_parent_sims + r.n_worker_sims,
         elapsed_s=time.perf_counter() - r.t0, trials=[t.name for t in r.trials],
-        experiment={**r.experiment.describe(), "effects_tried": list(r.effects),
+        experiment={**r.experiment.describe(), "simulated_by": simulated_by(r),
+                    "effects_tried": list(r.effects),
                     "effects_not_applicable": list(r.skipped_effects)},
         extras={"nominal_all": r.nominal_all, "after_all": r.after, "ev_all": r.ev_all,
                 "ev_named": r.ev_named,
                 "chosen": chosen, "trials": r.trials, "experiment": r.experiment})
+
+
+def simulated_by(r) -> str:
+    """What re-simulated the trials: the plant FMU given, the built-in plant, or the
+    experiment's own model (a position or rendered-impedance experiment)."""
+    if not r.experiment.uses_plant:
+        return {"position": "diagnosis.limb (the limb model driven by the measured angle)",
+                "rendered": "the rendered impedance M_rd, B_rd, K_rd"}.get(
+            r.experiment.kind, type(r.experiment).__name__)
+    if r.plant is not None:
+        return f"plant FMU {getattr(r.plant, 'path', r.plant)}"
+    from orchestrator.trial import plant_kind
+    return f"built-in plant: {plant_kind()}"
 
 
 FEATURE_MEASURE = ("features: mean squared normalised difference of the FRF, noise, static "

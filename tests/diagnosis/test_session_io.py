@@ -4,6 +4,7 @@ output, in the diagnosis."""
 import dataclasses
 
 import numpy as np
+import pytest
 
 from diagnosis.conventions import check_angles
 from estimation.synthetic import position_trial
@@ -30,3 +31,67 @@ def test_theta_ref_in_degrees_beside_theta_in_radians_is_noticed():
     assert "theta_ref in degrees" in names, names
     np.testing.assert_allclose(out[0].theta_ref, t.theta_ref, atol=1e-12)
     np.testing.assert_allclose(out[0].theta, t.theta, atol=1e-12)
+
+
+def test_diagnose_reader_says_a_repeated_note_once(tmp_path):
+    """200 files lacking one key gave 200 identical notes; now one, with the count."""
+    import json
+
+    import pandas as pd
+
+    import trialformat as tf
+    from diagnosis.inputs import load_trials
+    rng = np.random.default_rng(3)
+    n = 9000
+    for i in range(3):
+        cols = {"t": np.arange(n) / 1000.0, "theta[1]": rng.standard_normal(n),
+                "tau_h[1]": rng.standard_normal(n)}
+        pd.DataFrame(cols).to_csv(tmp_path / f"r{i}.csv", index=False)
+        meta = tf.default_metadata(1)
+        meta.update(perturbation={"kind": "position"})
+        meta.pop("friction")
+        (tmp_path / f"r{i}.json").write_text(json.dumps(meta))
+    with pytest.warns(UserWarning) as record:
+        load_trials(tmp_path)
+    said = [str(w.message) for w in record if "metadata keys absent" in str(w.message)]
+    assert len(said) == 1 and said[0].startswith("3 files (r0.csv, r1.csv, r2.csv): ")
+
+
+def test_a_held_joints_absent_reference_is_not_refused_as_constant():
+    """Two-joint position trials with theta_ref only for the perturbed joint (as
+    log-format.md describes) were refused: "theta_ref[2] is constant (0 rad)"."""
+    import trialformat as tf
+    from diagnosis.errors import DiagnosisInputError
+    from diagnosis.inputs import check_signals
+    rng = np.random.default_rng(0)
+    n = 2000
+    meta = tf.default_metadata(2)
+    meta.update(perturbation={"kind": "position"}, perturbed_dof=1)
+    ref = np.column_stack([rng.standard_normal(n), np.zeros(n)])
+    trial = tf.Trial(meta=meta, name="p1", t=np.arange(n) / 1000.0,
+                     theta=rng.standard_normal((n, 2)), tau_h=rng.standard_normal((n, 2)),
+                     theta_ref=ref)
+    check_signals(trial, "p1.csv")
+    trial.theta_ref = ref[:, ::-1].copy()  # the perturbed joint's reference constant
+    with pytest.raises(DiagnosisInputError, match=r"theta_ref\[1\] is constant"):
+        check_signals(trial, "p1.csv")
+
+
+def test_plant_choice_on_position_trials_is_said_not_used(monkeypatch):
+    """--plant modelica / ARMEXO_PLANT=modelica with position trials was ignored silently."""
+    from types import SimpleNamespace
+
+    from diagnosis.pipeline.conventions import check_plant_options
+    from diagnosis.pipeline.report import simulated_by
+    r = SimpleNamespace(experiment=SimpleNamespace(uses_plant=False, kind="position"),
+                        trials=[SimpleNamespace(name="relaxed_1")], plant=None, rk4_step=None)
+    monkeypatch.delenv("ARMEXO_PLANT", raising=False)
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_plant_options(r)  # nothing chosen: nothing said
+    monkeypatch.setenv("ARMEXO_PLANT", "modelica")
+    with pytest.warns(UserWarning, match=r"ARMEXO_PLANT = modelica is not used: trials "
+                      r"relaxed_1 are position experiments, re-simulated by the limb model"):
+        check_plant_options(r)
+    assert simulated_by(r).startswith("diagnosis.limb")

@@ -245,3 +245,70 @@ def test_repeats_from_coarse_printing_are_not_called_not_increasing(tmp_path):
     path = _write(tmp_path / "w", cols, 1000.0, t_fmt="%.3f")
     with pytest.raises(TrialFormatError, match=r"key 'fs'=1000.0 disagrees with column 't'"):
         tf.read_trial(path)
+
+
+POSTURES = [  # (posture_deg in the JSON, or "absent"), the refusal's words
+    ("absent", r"'posture_deg' is required with \"angles\": \"absolute\""),
+    ([], r"'posture_deg' must be a list of 1 finite number\(s\) .* got array \[\]"),
+    ([None], r"'posture_deg' must be a list of 1 .* got array \[null\]"),
+    ([float("nan")], r"'posture_deg' must be a list of 1 .* got array \[NaN\]"),
+    ([10, 20], r"'posture_deg' must be a list of 1 .*n_dof=1.* got array \[10, 20\]"),
+    (["x"], r"'posture_deg' must be a list of 1 .* got array \[\"x\"\]"),
+]
+
+
+@pytest.mark.parametrize("posture, match", POSTURES, ids=[str(p[0]) for p in POSTURES])
+def test_bad_posture_with_absolute_angles_refused_by_name(tmp_path, posture, match):
+    """Absent, empty, null, NaN, too long or text: one message naming the key (these gave
+    KeyError, IndexError, StopIteration, broadcast and float() tracebacks)."""
+    path = _write(tmp_path / "w", _cols(1000.0, 9), 1000.0, angles="absolute")
+    meta = json.loads(path.with_suffix(".json").read_text())
+    meta.pop("posture_deg", None)
+    if posture != "absent":
+        meta["posture_deg"] = posture
+    path.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(TrialFormatError, match=match):
+        tf.read_trial(path)
+
+
+def test_good_posture_with_absolute_angles_reads_as_deviation(tmp_path):
+    cols = _cols(1000.0, 9)
+    path = _write(tmp_path / "w", cols, 1000.0, angles="absolute", posture_deg=[10])
+    trial = tf.read_trial(path)
+    np.testing.assert_allclose(trial.theta[:, 0], cols["theta[1]"] - np.deg2rad(10.0))
+
+
+def test_absent_fs_is_called_absent_when_t_disagrees(tmp_path):
+    """The message named a key 'fs'=1000.0 that the file does not have."""
+    path = _write(tmp_path / "w", _cols(2000.0, 9), 2000.0)
+    meta = json.loads(path.with_suffix(".json").read_text())
+    del meta["fs"]
+    path.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(TrialFormatError, match=r"key 'fs' is absent and its reference value "
+                       r"1000.0 disagrees with column 't' .*fs=2000.0\); declare fs"):
+        tf.read_trial(path)
+
+
+def test_three_joint_reference_posture_has_three_angles():
+    assert len(tf.default_metadata(3)["posture_deg"]) == 3
+
+
+def test_a_mat_named_by_its_stem_reads_like_a_csv_stem(tmp_path):
+    """``estimate experimental_data`` said "no such file" where ``NAME`` of a CSV works."""
+    trial = tf.read_trial(_write(tmp_path / "w", _cols(1000.0, 9), 1000.0))
+    tf.write_trial_mat(tmp_path / "m.mat", trial)
+    by_stem = tf.read_trials(str(tmp_path / "m"))
+    assert len(by_stem) == 1
+    np.testing.assert_array_equal(by_stem[0].tau_h, trial.tau_h)
+    assert tf.read_trial(tmp_path / "m").n_samples == trial.n_samples
+    with pytest.raises(TrialFormatError, match="no such file or folder"):
+        tf.read_trial(tmp_path / "absent")
+
+
+def test_theta_ref_without_a_perturbation_kind_suggests_position(tmp_path):
+    cols = {k: v for k, v in _cols(1000.0, 9).items() if k in ("t", "theta[1]", "tau_h[1]")}
+    cols["theta_ref[1]"] = cols["theta[1]"]
+    path = _write(tmp_path / "w", cols, 1000.0)
+    with pytest.raises(TrialFormatError, match=r"missing columns .*tau_delta\[1\].*declare "
+                       r"\"perturbation\": \{\"kind\": \"position\"\}"):
+        tf.read_trial(path)
