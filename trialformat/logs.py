@@ -436,8 +436,23 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
     if not csv_path.is_file():
         raise TrialFormatError(f"{csv_path}: data file missing")
     header, delimiter = csvtable.read_header(csv_path)
+    header, header_units = _header_units(header)
     arrays = _columns(csv_path, header, delimiter, meta, filled)
-    return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples)
+    return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples,
+                        units=header_units)
+
+
+def _header_units(header: list[str]) -> tuple[list[str], dict]:
+    """Column names with a stated unit split off (``theta[1] (deg)`` -> ``theta[1]``,
+    trialformat.units), and ``{column: unit}`` of those that state one."""
+    from .units import split_header
+    names, units = [], {}
+    for h in header:
+        name, unit = split_header(h)
+        names.append(name)
+        if unit is not None:
+            units[name] = unit
+    return names, units
 
 
 def _data_file(path: Path, stem: Path) -> Path:
@@ -471,8 +486,15 @@ def folder_trials(folder: str | os.PathLike) -> list[Path]:
 
 
 def finish_trial(meta: dict, arrays: dict, name: str, filled: list, where, *,
-                 min_samples: int = MIN_SAMPLES) -> Trial:
-    """Build, check and convert a trial from its arrays (shared by the CSV and .mat readers)."""
+                 min_samples: int = MIN_SAMPLES, units: dict | None = None,
+                 units_by: str = "column header") -> Trial:
+    """Build, check and convert a trial from its arrays (shared by the CSV and .mat readers).
+
+    ``units`` ({column: unit}, from the CSV headers or the nldat ``chanUnits``; said to be
+    stated by ``units_by``) and the metadata's ``units`` key are applied first
+    (trialformat.units: converted to SI, recorded in ``units_read``)."""
+    from .units import apply_units
+    apply_units(meta, arrays, units or {}, where, by=units_by)
     trial = Trial(meta=meta, name=name, filled_defaults=filled, **arrays)
     check_trial(trial, where, min_samples=min_samples)
     exact = np.arange(trial.n_samples) / trial.fs
