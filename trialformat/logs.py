@@ -272,14 +272,45 @@ def check_out_parent(path: str | os.PathLike, option: str = "--out") -> None:
 
 def simulated_trial(stem: str | os.PathLike) -> bool:
     """True when ``stem.json`` is the metadata of a trial this project simulated (this
-    format, with its ``simulation`` block), i.e. the output of an earlier simulate run."""
-    json_path = with_ending(trial_stem(stem), ".json")
+    format, with its ``simulation`` block) and the data file beside it is the one that
+    run wrote (its SHA-256 equals ``simulation.csv_sha256``, :func:`seal_simulated`), i.e.
+    the output of an earlier simulate run. A JSON that only looks simulated (copied beside
+    a lab CSV, or written before the seal existed) is not."""
+    stem = trial_stem(stem)
+    json_path = with_ending(stem, ".json")
     try:
         meta = json.loads(json_path.read_text(encoding="utf-8"))
     except (ValueError, UnicodeDecodeError, OSError):
         return False
-    return (isinstance(meta, dict) and isinstance(meta.get("simulation"), dict)
-            and str(meta.get("format", "")).startswith(FORMAT.split("/")[0]))
+    if not (isinstance(meta, dict) and isinstance(meta.get("simulation"), dict)
+            and str(meta.get("format", "")).startswith(FORMAT.split("/")[0])):
+        return False
+    sealed = meta["simulation"].get("csv_sha256")
+    data = [p for p in (with_ending(stem, ".csv"), with_ending(stem, ".csv.gz"))
+            if p.exists()]
+    if not data:
+        return True  # the metadata alone: nothing of a lab's is at stake beyond it
+    return isinstance(sealed, str) and all(_sha256(p) == sealed for p in data)
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def seal_simulated(csv_path: str | os.PathLike) -> None:
+    """Record the SHA-256 of a simulated trial's CSV in its JSON (``simulation.csv_sha256``)
+    so that a later simulate run replaces it only while it is that file
+    (:func:`simulated_trial`)."""
+    csv_path = Path(csv_path)
+    json_path = with_ending(trial_stem(csv_path), ".json")
+    meta = json.loads(json_path.read_text(encoding="utf-8"))
+    meta.setdefault("simulation", {})["csv_sha256"] = _sha256(csv_path)
+    atomic_write(json_path, lambda fh: fh.write(json.dumps(meta, indent=2).encode()))
 
 
 def check_trial_out(stem: str | os.PathLike, option: str = "--out", *,
