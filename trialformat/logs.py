@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import re
 import shutil
 import tempfile
 import warnings
@@ -467,6 +468,7 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
     if not csv_path.is_file():
         raise TrialFormatError(f"{csv_path}: data file missing")
     header, delimiter = csvtable.read_header(csv_path)
+    header = _rename_channels(header, meta, json_path, csv_path)
     header, header_units = _header_units(header)
     arrays = _columns(csv_path, header, delimiter, meta, filled)
     return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples,
@@ -588,7 +590,79 @@ def _read_metadata(json_path: Path) -> tuple[dict, list[str]]:
         raise TrialFormatError(f"{json_path}: JSON does not parse: {exc}") from None
     if not isinstance(meta, dict):
         raise TrialFormatError(f"{json_path}: metadata must be a JSON object")
+    _fold_torque_sign(meta, json_path)
     return meta, complete_metadata(meta, json_path)
+
+
+def _fold_torque_sign(meta: dict, where) -> None:
+    """A top-level ``"torque_sign"`` (as an nldat sidecar writes it) is
+    ``sensors.torque_sign``, never ignored; the two disagreeing are refused."""
+    if "torque_sign" not in meta:
+        return
+    value = meta.pop("torque_sign")
+    sensors = meta.setdefault("sensors", {})
+    if not isinstance(sensors, dict):
+        return  # complete_metadata names the malformed 'sensors'
+    if "torque_sign" in sensors and sensors["torque_sign"] != value:
+        raise TrialFormatError(f"{where}: key 'torque_sign' ({value!r}) and key "
+                               f"'sensors.torque_sign' ({sensors['torque_sign']!r}) disagree; "
+                               f"state the sign once, as 'sensors.torque_sign'")
+    sensors["torque_sign"] = value
+
+
+_TARGET_COLUMN = re.compile(r"^(?:t|(?:" + "|".join(SIGNALS + ("theta_ref",))
+                            + r")\[(\d+)\])$")
+_UNIT_TAIL = re.compile(r"^(.*?)\s*([\(\[][^\)\]]*[\)\]])\s*$")
+
+
+def _rename_channels(header: list[str], meta: dict, json_path: Path, csv_path: Path
+                     ) -> list[str]:
+    """The header with the metadata's ``"channels"`` mapping applied (``{"pos": "theta[1]",
+    "ang (deg)": ...}``, a column's name, with or without its unit, to ``t``,
+    ``theta[j]``, ``tau_h[j]``, ``theta_ref[j]``, ``tau_delta[j]``, ``tau_m[j]``, or null:
+    left as an extra column); the mapping is removed from the metadata and recorded in
+    ``channels_read``.
+
+    Raises
+    ------
+    TrialFormatError
+        ``channels`` not an object, a target that is not a column of the format, or a
+        name that is not a column of the CSV (naming the key and the header).
+    """
+    channels = meta.pop("channels", None)
+    if channels is None:
+        return header
+    if not isinstance(channels, dict):
+        raise TrialFormatError(f"{json_path}: key 'channels' must be an object mapping a "
+                               f"column of {csv_path.name} to its name in the format, e.g. "
+                               f'{{"pos": "theta[1]"}}, got {_short(channels)}')
+    for name, target in channels.items():
+        if target is not None and not (isinstance(target, str)
+                                       and _TARGET_COLUMN.match(target)):
+            raise TrialFormatError(
+                f"{json_path}: key 'channels.{name}' must be one of t, "
+                f"{', '.join(s + '[j]' for s in SIGNALS + ('theta_ref',))} or null, got "
+                f"{_short(target)}")
+    out, used = [], set()
+    for h in header:
+        m = _UNIT_TAIL.match(h)
+        if h in channels:
+            key, tail = h, ""
+        elif m and m.group(1) in channels:
+            key, tail = m.group(1), " " + m.group(2)
+        else:
+            out.append(h)
+            continue
+        used.add(key)
+        out.append(channels[key] + tail if channels[key] is not None
+                   else h + " #ignored" if _TARGET_COLUMN.match(key) else h)
+    unknown = [k for k in channels if k not in used]
+    if unknown:
+        raise TrialFormatError(f"{json_path}: key 'channels' names {unknown}, not columns "
+                               f"of {csv_path.name} (header: "
+                               f"{csvtable.printable(', '.join(header))[:300]})")
+    meta["channels_read"] = {k: v for k, v in channels.items()}
+    return out
 
 
 _CHOICES = {("perturbation", "kind"): ("torque", "position"),

@@ -322,6 +322,11 @@ def _metadata(path, data, holder=None) -> dict:
         where = json_path
     else:
         where = f"{holder} variable 'meta'"
+        beside = path.with_name(path.stem + ".json")
+        if beside.is_file():  # never silently ignored (issue 22)
+            raise MatFileError(f"{beside}: not read, {holder} holds its own metadata "
+                               f"(variable 'meta'); merge its keys into 'meta', or remove "
+                               f"or rename {beside.name}")
     if isinstance(raw, dict):
         return _from_struct(raw)
     if isinstance(raw, np.ndarray) and raw.dtype.kind == "U":
