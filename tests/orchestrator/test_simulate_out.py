@@ -46,3 +46,14 @@ def test_a_lab_csv_beside_a_simulated_looking_json_is_protected(reference_fmu, t
                  *RUN]) == 0
     # its own earlier output (sealed) is still replaced without --force
     assert main(["simulate", "--out", str(stem), "--fmu", str(reference_fmu), *RUN]) == 0
+
+
+def test_grid_refuses_a_level_listed_twice():
+    import pytest
+
+    from orchestrator.errors import SetupError
+    from orchestrator.grid import grid_tasks
+    with pytest.raises(SetupError, match=r"friction levels list a level twice: \[0, 0\]"):
+        grid_tasks(friction_levels=(0, 0), resolution_levels=(0,), perturbation_levels=(3,))
+    names = [t["name"] for t in grid_tasks()]
+    assert len(set(names)) == len(names)
