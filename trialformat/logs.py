@@ -630,6 +630,7 @@ def _rename_channels(header: list[str], meta: dict, json_path: Path, csv_path: P
         name that is not a column of the CSV (naming the key and the header).
     """
     channels = meta.pop("channels", None)
+    meta.pop("channels_read", None)  # an earlier reader's record (the file is renamed)
     if channels is None:
         return header
     if not isinstance(channels, dict):

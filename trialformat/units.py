@@ -123,9 +123,10 @@ def apply_units(meta: dict, arrays: dict, header_units: dict, where, *,
     """
     stated = stated_units(meta, header_units, where, by=by)
     meta.pop("units", None)
+    meta.pop("units_read", None)  # an earlier reader's record (the file is now in SI)
     if not stated:
         return
-    record = dict(meta.get("units_read") or {})
+    record = {}
     for key, (unit, source) in stated.items():
         m = _COLUMN.match(key)
         signal, joint = m.group(1), m.group(2)

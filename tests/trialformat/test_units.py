@@ -58,6 +58,7 @@ def test_metadata_units_apply_to_every_channel_they_name(tmp_path):
         "degrees"
     again = tf.read_trial(tf.write_trial(tmp_path / "b", back), min_samples=1000)
     np.testing.assert_allclose(again.theta, si.theta, rtol=1e-12)  # not converted twice
+    assert "units_read" not in again.meta  # written in SI: nothing stated, nothing applied
 
 
 def test_an_unknown_or_conflicting_unit_is_refused_by_name(tmp_path):
