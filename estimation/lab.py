@@ -30,7 +30,6 @@ from trialformat.reference import ANGLE_LIMIT_RAD, PLAUSIBLE_DEVIATION_RAD
 
 from .accuracy import (WEIGHTINGS, corrected_impedance, fit_impedance, left_limit_delay,
                        true_impedance, vaf)
-from .conditions import condition_of
 from .errors import EstimationError
 from .estimator import (METHODS, band_mask, default_method, estimate_impedance,
                         perturbation_of)
@@ -338,13 +337,6 @@ def element_names(n) -> list:
 # ----------------------------------------------------------------------------- grouping
 
 
-def _group_key(trial):
-    cond = condition_of(trial)
-    return (trial.n_dof, trial.fs, trial.perturbation_kind, str(cond.friction),
-            str(cond.resolution), str(cond.perturbation), cond.tuning,
-            str(trial.meta.get("condition") or ""))
-
-
 def estimation_units(trials, *, pool=False) -> list[Unit]:
     """Split trials into the sets estimated together (log-format.md, "condition"): the
     sets of the one grouping rule shared with ``figures`` and ``diagnose``
@@ -358,15 +350,6 @@ def estimation_units(trials, *, pool=False) -> list[Unit]:
     """
     from .grouping import trial_sets
     return [Unit(s.label, s.trials, s.why) for s in trial_sets(trials, pool=pool)]
-
-
-def _joined(group) -> str:
-    return group[0].name if len(group) == 1 else "+".join(t.name for t in group)
-
-
-def _is_simulated(trial) -> bool:
-    source = str(trial.meta.get("source", ""))
-    return source.startswith(("simulated: orchestrator", "estimation.synthetic: linear"))
 
 
 def left_limit_sampled(trials) -> bool:
