@@ -5,7 +5,8 @@ may state other units in three places, and every reader applies them the same wa
 
 - the metadata key ``"units"``: ``{"theta": "deg", "tau_h[2]": "N mm", "t": "ms"}``, a
   signal name applying to every joint's column, a column name to that column only;
-- a CSV column header with the unit after the name: ``theta[1] (deg)``, ``tau_h[1] [N m]``;
+- a CSV column header with the unit after the name: ``theta[1] (deg)``, ``tau_h[1] [N m]``
+  (a tail that is no known unit, ``tau_h[1] (raw)``, leaves the column an extra one);
 - an NLID ``nldat`` object's ``chanUnits`` (trialformat.nlid).
 
 Each stated unit is converted to SI on reading (a factor per column) and recorded in the
@@ -41,9 +42,16 @@ _COLUMN = re.compile(r"^(" + "|".join(KIND) + r")(?:\[(\d+)\])?$")
 
 
 def split_header(name: str) -> tuple[str, str | None]:
-    """``"theta[1] (deg)"`` -> ``("theta[1]", "deg")``; a plain name -> ``(name, None)``."""
+    """``"theta[1] (deg)"`` -> ``("theta[1]", "deg")``; a plain name, or a tail that is no
+    unit known for the signal (``"tau_h[1] (raw)"``: an extra column), -> ``(name, None)``."""
     m = _HEADER.match(name)
-    return (m.group(1), m.group(2)) if m else (name, None)
+    if not m:
+        return name, None
+    try:
+        factor(m.group(1), m.group(2), "")
+    except TrialFormatError:
+        return name, None
+    return m.group(1), m.group(2)
 
 
 def factor(column: str, unit: str, where) -> float | None:

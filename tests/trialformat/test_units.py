@@ -111,3 +111,14 @@ def test_estimate_records_the_units_it_read(tmp_path, capsys):
     (result,) = json.loads(out.read_text())
     assert result["parameters"]["K"]["value"][0][0] == pytest.approx(80.0, rel=0.05)
     assert result["corrections"]["units_read"]["a"]["theta[1]"]["unit"] == "deg"
+
+
+def test_a_header_tail_that_is_no_unit_stays_an_extra_column(tmp_path):
+    si = _si_trial()
+    csv = tf.write_trial(tmp_path / "a", si)
+    text = csv.read_text().splitlines()
+    text = [text[0] + ",tau_h[1] (raw)"] + [line + ",0" for line in text[1:]]
+    csv.write_text("\n".join(text) + "\n")
+    back = tf.read_trial(csv, min_samples=1000)
+    np.testing.assert_array_equal(back.tau_h, si.tau_h)
+    assert "units_read" not in back.meta
