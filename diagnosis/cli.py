@@ -78,6 +78,8 @@ def _diagnose(args) -> int:
                       progress=not args.quiet, workers=args.workers,
                       scheduler=args.scheduler, rk4_step=args.rk4_step,
                       scheduling=args.scheduling)
+    if getattr(report, "grouping", None):
+        print(report.grouping)
     reports = getattr(report, "reports", None) or {None: report}
     for condition, one in reports.items():
         named = " + ".join(one.named)

@@ -75,12 +75,16 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     from .inputs import load_trials, split_conditions
     options = dict(config=config, plant=plant, progress=progress, workers=workers,
                    scheduler=scheduler, rk4_step=rk4_step)
+    from estimation.grouping import describe, trial_sets
     trials = load_trials(source, check=False)
     if scheduling is not None:
         from trialformat.scheduling import request
         for t in trials:
             request(t, scheduling)
     groups = split_conditions(trials)
+    # the rule estimate and figures follow too, said in one line of each report
+    options["grouping"] = describe(trial_sets(trials))
+    grouping = options["grouping"]
     if len(groups) == 1:
         trials = next(iter(groups.values()))
         return run(DiagnosisRun(source=source, out_dir=out_dir, trials=trials,
@@ -89,12 +93,20 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     from .report import write_set_index
     if out_dir is not None:
         check_out_dir(out_dir, source)  # the index folder too holds nothing of the user's
+    import warnings
+
+    from estimation.grouping import unique_file_names
+    folders, renamed = unique_file_names(list(groups), _safe)
+    for note in renamed:  # one name, one output (issue 22)
+        warnings.warn(f"report folders: {note}", stacklevel=2)
     reports = {}
-    for condition, trials in groups.items():
-        sub = None if out_dir is None else Path(out_dir) / _safe(condition)
+    for (condition, trials), folder in zip(groups.items(), folders):
+        sub = None if out_dir is None else Path(out_dir) / folder
         reports[condition] = run(DiagnosisRun(source=source, out_dir=sub, trials=trials,
                                               **options)).report
     result = DiagnosisSet(reports)
+    result.notes = renamed
+    result.grouping = grouping
     if out_dir is not None:
         result.out_dir = Path(out_dir)
         write_set_index(result, out_dir)
@@ -116,6 +128,7 @@ class DiagnosisSet:
     def __init__(self, reports: dict):
         self.reports = reports
         self.out_dir = None
+        self.notes = []  # output names made unique (issue 22)
 
     @property
     def verdict(self) -> str:

@@ -167,16 +167,32 @@ def check_signals(trial, path) -> None:
 
 
 def split_conditions(trials) -> dict:
-    """Trials grouped by their ``condition`` label (None: one group), each group checked
-    to declare one set-up (:func:`check_consistent`); in the order first met."""
-    groups: dict = {}
-    for t in trials:
-        groups.setdefault(t.meta.get("condition"), []).append(t)
-    if len(groups) > 1 and None in groups:
-        raise DiagnosisInputError(
-            f"trials {[t.name for t in groups[None]]} have no 'condition' label while "
-            f"others have one ({sorted(str(k) for k in groups if k is not None)}): label "
-            f"every trial or none")
+    """Trials grouped by the one grouping rule shared with ``estimate`` and ``figures``
+    (:func:`estimation.grouping.trial_sets`: one set per ``condition`` label; unlabelled
+    trials together only one per perturbed joint at one declared set-up and level, else
+    each alone), each group checked to declare one set-up (:func:`check_consistent`). A
+    single set has the key None; several are keyed by their labels.
+
+    Raises
+    ------
+    DiagnosisInputError
+        What the rule refuses (a non-string label, ...), naming the trials.
+    """
+    from estimation.errors import EstimationError
+    from estimation.grouping import trial_sets
+    try:
+        sets = trial_sets(trials)
+    except EstimationError as exc:
+        raise DiagnosisInputError(str(exc)) from None
+    if len(sets) == 1:
+        groups = {None: sets[0].trials}
+    else:
+        groups = {}
+        for s in sets:  # an unlabelled recording named like a label keeps both
+            key = s.label
+            while key in groups:
+                key += " (unlabelled)" if not s.labelled else "'"
+            groups[key] = s.trials
     for group in groups.values():
         check_consistent(group)
     return groups

@@ -44,6 +44,8 @@ class DiagnosisReport:
     extras: dict = field(default_factory=dict, repr=False)
     #: effects that explain the held-out gap as well as the named one (verdict.ties)
     indistinguishable: list = field(default_factory=list)
+    #: how the trials were grouped, in one line (estimation.grouping.describe)
+    grouping: str = ""
 
     def to_dict(self) -> dict:
         return {"format": "arm-impedance-diagnosis/1", "verdict": self.verdict,
@@ -57,7 +59,8 @@ class DiagnosisReport:
                 "where": self.where, "gap_in_time": self.gap_in_time, "arm": self.arm, "split": self.split,
                 "trials": self.trials, "experiment": self.experiment,
                 "n_simulations": self.n_simulations,
-                "elapsed_s": self.elapsed_s, "config": self.config}
+                "elapsed_s": self.elapsed_s, "config": self.config,
+                "grouping": self.grouping}
 
 
 FIGURES = {"where": "gap_where.png", "ranking": "gap_ranking.png",
@@ -122,6 +125,7 @@ def markdown(report) -> str:
     exp = report.experiment or {}
     lines = [f"# Sim-to-real gap diagnosis", "",
              f"Trials: {', '.join(report.trials)}", "",
+             *([report.grouping, ""] if report.grouping else []),
              f"Experiment: {exp.get('class', '-')} ({exp.get('title', '-')})"
              + (f"; effects not applicable to it: {', '.join(exp['effects_not_applicable'])}"
                 if exp.get("effects_not_applicable") else "") + ".", "",
@@ -379,6 +383,9 @@ def write_set_index(result, out_dir) -> Path:
                      f"{'-' if red is None else _fmt(100 * red) + ' %'} | "
                      f"{_fmt(r.gap['nominal_all'])} ({measure_name(r.gap)}) |")
     lines += [""] + [f"- **{c}**: {r.summary}" for c, r in result.reports.items()] + [""]
+    lines += [f"Note: {n}." for n in getattr(result, "notes", [])]
+    if getattr(result, "grouping", None):
+        lines += ["", result.grouping, ""]
     _atomic_text(out / "report.json", json.dumps(_clean(
         {"format": "arm-impedance-diagnosis-set/1",
          "conditions": {c: {"report": f"{r.out_dir.name if r.out_dir else c}/report.json",

@@ -314,6 +314,12 @@ def lab_results(trials, options, truth_name="none", failures=None):
     return results
 
 
+def grouping_line(trials, options) -> str:
+    """The one line saying how the trials were grouped (estimation.grouping.describe)."""
+    from .grouping import describe, trial_sets
+    return describe(trial_sets(trials, pool=options.pool))
+
+
 def _report_failures(failures, results) -> int:
     """Print one line per failed condition; exit status 1 when any failed."""
     from .errors import EstimationError
@@ -337,12 +343,15 @@ def run_estimate(args) -> int:
     failures = []
     results = lab_results(trials, options, args.truth, failures)
     status = _report_failures(failures, results)
+    grouping = grouping_line(trials, options)
+    print(grouping)
     for r in results:
         print(describe(r, args.torque_sign))
     _reflex_note(results)
     if args.json:
         recorded = recorded_options(options, args)
         doc = [{**r.to_json(), "condition": r.label, "options": recorded,
+                "grouping_rule": grouping,
                 "compensated": r.corrections["left_limit_sampling"],
                 "leakage_removed": r.corrections["window_leakage"]} for r in results]
         args.json.parent.mkdir(parents=True, exist_ok=True)
@@ -514,8 +523,10 @@ def run_figures(args) -> int:
         failures = []
         results = lab_results(trials, options, truth, failures)
         status = _report_failures(failures, results)
+        grouping = grouping_line(trials, options)
         files = write_lab_report(results, args.out, options={
-            **recorded_options(options, args), "truth": truth})
+            **recorded_options(options, args), "truth": truth}, grouping=grouping)
+        print(grouping)
         for r in results:
             print(describe(r, args.torque_sign))
         _reflex_note(results)

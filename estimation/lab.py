@@ -30,7 +30,6 @@ from trialformat.reference import ANGLE_LIMIT_RAD, PLAUSIBLE_DEVIATION_RAD
 
 from .accuracy import (WEIGHTINGS, corrected_impedance, fit_impedance, left_limit_delay,
                        true_impedance, vaf)
-from .conditions import condition_of
 from .errors import EstimationError
 from .estimator import (METHODS, band_mask, default_method, estimate_impedance,
                         perturbation_of)
@@ -338,63 +337,19 @@ def element_names(n) -> list:
 # ----------------------------------------------------------------------------- grouping
 
 
-def _group_key(trial):
-    cond = condition_of(trial)
-    return (trial.n_dof, trial.fs, trial.perturbation_kind, str(cond.friction),
-            str(cond.resolution), str(cond.perturbation), cond.tuning,
-            str(trial.meta.get("condition") or ""))
-
-
 def estimation_units(trials, *, pool=False) -> list[Unit]:
-    """Split trials into the sets estimated together (log-format.md, "condition").
+    """Split trials into the sets estimated together (log-format.md, "condition"): the
+    sets of the one grouping rule shared with ``figures`` and ``diagnose``
+    (:func:`estimation.grouping.trial_sets`), sorted by label.
 
-    Trials group by n, fs, perturbation kind, declared set-up and level, and the
-    ``condition`` label. A labelled group (or any group with ``pool``) is one set. An
-    unlabelled group with at most one trial per perturbed joint is one set (the
-    decomposition's one trial per joint). Otherwise unlabelled recordings are separate:
-    one set each when a trial suffices alone (one joint, or all joints perturbed at once);
-    for several joints an EstimationError says which trials to label.
+    Raises
+    ------
+    EstimationError
+        What the grouping rule refuses (a non-string label, unlabelled repeats of one joint
+        of a multi-joint set-up).
     """
-    groups = {}
-    for t in trials:
-        groups.setdefault(_group_key(t), []).append(t)
-    units = []
-    for key, group in groups.items():
-        label = key[-1]
-        cond = condition_of(group[0])
-        base = label or (cond.label if group[0].n_dof > 1 and _is_simulated(group[0])
-                         else "")
-        by_joint = {}
-        for t in group:
-            by_joint.setdefault(t.perturbed_dof, []).append(t)
-        if label or pool:
-            why = (f"condition label {label!r}" if label else "pooled on request") + \
-                f": {len(group)} trial(s) averaged"
-            units.append(Unit(base or "pooled", group, why))
-        elif all(len(v) == 1 for v in by_joint.values()):
-            units.append(Unit(base or _joined(group), group,
-                              "one trial per perturbed joint" if len(group) > 1
-                              else "single recording"))
-        elif group[0].n_dof == 1 or all(k is None for k in by_joint):
-            units += [Unit(t.name, [t], "unlabelled recording, estimated alone")
-                      for t in group]
-        else:
-            dup = {k: [t.name for t in v] for k, v in by_joint.items() if len(v) > 1}
-            raise EstimationError(
-                f"several unlabelled recordings perturb the same joint ({dup}); they are "
-                f"separate recordings and are not averaged silently: give each set of one "
-                f"trial per joint its own 'condition' label in the metadata, or pool them "
-                f"on purpose (--pool)")
-    return sorted(units, key=lambda u: u.label)
-
-
-def _joined(group) -> str:
-    return group[0].name if len(group) == 1 else "+".join(t.name for t in group)
-
-
-def _is_simulated(trial) -> bool:
-    source = str(trial.meta.get("source", ""))
-    return source.startswith(("simulated: orchestrator", "estimation.synthetic: linear"))
+    from .grouping import trial_sets
+    return [Unit(s.label, s.trials, s.why) for s in trial_sets(trials, pool=pool)]
 
 
 def left_limit_sampled(trials) -> bool:
@@ -460,7 +415,10 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
         label=unit.label, trials=[t.name for t in usable], reason=unit.reason, method=method,
         n_dof=n, fs=fs, band_hz=band, band_source=band_source, welch=welch, n_segments=est.n_segments,
         corrections={"left_limit_sampling": sampling, "window_leakage": leakage,
-                     "inertia_delay_s": delay},
+                     "inertia_delay_s": delay,
+                     # units the files stated, converted to SI on reading (issue 22)
+                     "units_read": {t.name: t.meta["units_read"] for t in usable
+                                    if t.meta.get("units_read")}},
         f=est.f, Z=est.Z, coherence=est.coherence_Z, model=model, fit=fit,
         vaf=np.atleast_2d(vaf(Zb, ref_Z)), coherence_band=est.mean_coherence(),
         weighting=options.weighting, data_band=found)

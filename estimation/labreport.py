@@ -25,6 +25,7 @@ import json
 import os
 import re
 import shutil
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -47,8 +48,11 @@ def safe_name(label: str) -> str:
     return re.sub(r"[^A-Za-z0-9._+-]+", "_", label).strip("_") or "result"
 
 
-def write_lab_report(results, out, *, options=None) -> list[str]:
-    """Write the lab report of ``results`` (list of LabResult) into folder ``out``.
+def write_lab_report(results, out, *, options=None, grouping=None) -> list[str]:
+    """Write the lab report of ``results`` (list of LabResult) into folder ``out``;
+    ``grouping``, the line saying how the trials were grouped (estimation.grouping), goes
+    into ``results.json``. Labels that map to one file name get unique names (``_2``),
+    each said in a note (stderr and ``results.json`` ``notes``).
 
     Returns the paths of the files written (inside ``out``).
     """
@@ -57,8 +61,11 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
     tmp = own_temp_dir(f".{out.name}.tmp", out.parent)  # a killed run's: removed next run
     try:
         names = []
-        for r in results:
-            stem = safe_name(r.label)
+        from .grouping import unique_file_names
+        stems, renamed = unique_file_names([r.label for r in results], safe_name)
+        for note in renamed:  # one name, one output (issue 22)
+            print(f"note: figures: {note}", file=sys.stderr)
+        for r, stem in zip(results, stems):
             names += write_frf(r, tmp / f"frf_{stem}")
             names.append(_save(bode(r), tmp / f"bode_{stem}.png"))
             from .pvlab import write_varying_files  # K, B, I over the scheduling variable
@@ -67,7 +74,9 @@ def write_lab_report(results, out, *, options=None) -> list[str]:
         if any(getattr(r, "reflex", None) for r in results):
             from .reflex import write_reflex_tables
             names += write_reflex_tables(results, tmp)
-        doc = {"options": options or {}, "results": [r.to_json() for r in results]}
+        doc = {"options": options or {}, "results": [
+            {**r.to_json(), "files": f"frf_{stem}.csv"} for r, stem in zip(results, stems)],
+            "notes": renamed, "grouping": grouping}
         names.append(_text(tmp / "results.json", json.dumps(doc, indent=1)))
         os.chmod(tmp, 0o777 & ~current_umask())
         replace_dir(tmp, out, kind="lab")

@@ -11,6 +11,7 @@ import argparse
 import dataclasses
 import importlib
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -102,7 +103,8 @@ def build_parser() -> argparse.ArgumentParser:
 # ----------------------------------------------------------------------------- simulate
 def _add_simulate(sub):
     p = sub.add_parser("simulate", help="simulate one trial and write NAME.csv/.json")
-    p.add_argument("--out", required=True, help="output stem (NAME, without extension); an "
+    p.add_argument("--out", required=True, help="output stem (NAME: NAME.csv + NAME.json; "
+                   "NAME.mat: one .mat; FOLDER/: FOLDER/FOLDER.csv in it); an "
                    "existing NAME.csv/.json is replaced only when it is an earlier simulated "
                    "trial of this project, or with --force")
     p.add_argument("--force", action="store_true",
@@ -142,7 +144,12 @@ def _simulate(args) -> int:
 
     dof = None if args.dof == "all" else _int(args.dof, "--dof")
     effects = _json(args.effects, "--effects")
-    check_trial_out(args.out, "--out", force=args.force)  # before the run, never after it
+    out, as_mat = simulate_target(args.out)
+    check_trial_out(out, "--out", force=args.force)  # before the run, never after it
+    if as_mat and Path(out).with_suffix(".mat").exists() and not args.force:
+        from trialformat import OutputError
+        raise OutputError(f"--out {args.out}: {out}.mat exists; it is left as it is: give "
+                          f"a new name, or --force to replace it")
     setup = Setup.reference(args.friction, args.resolution, args.tuning, args.arm)
     check_samples(args.duration, args.fs or setup.fs)
     if args.fs is not None:
@@ -162,11 +169,33 @@ def _simulate(args) -> int:
         parameters["rk4_step"] = args.rk4_step
     trial = simulate_trial(setup, perturbed_dof=dof, level=args.perturbation, seed=args.seed,
                            duration_s=args.duration, effects=effects, plant=args.fmu,
-                           communication_step_s=args.comm_step, name=Path(args.out).name,
+                           communication_step_s=args.comm_step, name=Path(out).name,
                            parameters=parameters or None)
-    path = write_trial(args.out, trial)
+    if as_mat:
+        from trialformat import write_trial_mat
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        path = write_trial_mat(Path(str(out) + ".mat"), trial)
+    else:
+        from trialformat import seal_simulated
+        path = write_trial(out, trial)
+        seal_simulated(path)  # replaced by a later run only while it is this file
     print(f"wrote {path} ({trial.n_samples} samples)")
     return 0
+
+
+def simulate_target(out) -> tuple[Path, bool]:
+    """The trial stem ``simulate --out`` writes and whether as ``.mat``.
+
+    ``NAME`` / ``NAME.csv`` / ``NAME.json``: ``NAME.csv`` + ``NAME.json``; ``NAME.mat``:
+    one ``NAME.mat`` (metadata inside); a folder (an existing one, or a path ending in
+    ``/``): the trial is written into it, named after the folder (``S5/`` ->
+    ``S5/S5.csv``), never beside it."""
+    from trialformat import trial_stem
+    text = str(out)
+    path = Path(text)
+    if text.endswith(("/", os.sep)) or path.is_dir():
+        return path / path.resolve().name, False
+    return trial_stem(path), path.name.lower().endswith(".mat")
 
 
 # ----------------------------------------------------------------------------- grid

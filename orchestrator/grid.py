@@ -81,6 +81,13 @@ def grid_tasks(*, friction_levels=(0, 1, 2, 3), resolution_levels=(0, 1, 2, 3),
     bad = [k for k in joints if k is not None and k > REFERENCE_ARMS[arm]]
     if bad:
         raise SetupError(f"dofs {bad} beyond the {REFERENCE_ARMS[arm]} joints of arm {arm!r}")
+    for what, levels in (("friction levels", friction_levels),
+                         ("resolution levels", resolution_levels),
+                         ("perturbation levels", perturbation_levels)):
+        names = [str(v) for v in levels]
+        if len(set(names)) != len(names):  # one name, one output (issue 22)
+            raise SetupError(f"{what} list a level twice: {list(levels)!r}; each trial "
+                             f"name (fric{{F}}_res{{R}}_pert{{P}}_dof{{k}}) is written once")
     tasks = []
     for f in friction_levels:
         for r in resolution_levels:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import re
 import shutil
 import tempfile
 import warnings
@@ -273,14 +274,45 @@ def check_out_parent(path: str | os.PathLike, option: str = "--out") -> None:
 
 def simulated_trial(stem: str | os.PathLike) -> bool:
     """True when ``stem.json`` is the metadata of a trial this project simulated (this
-    format, with its ``simulation`` block), i.e. the output of an earlier simulate run."""
-    json_path = with_ending(trial_stem(stem), ".json")
+    format, with its ``simulation`` block) and the data file beside it is the one that
+    run wrote (its SHA-256 equals ``simulation.csv_sha256``, :func:`seal_simulated`), i.e.
+    the output of an earlier simulate run. A JSON that only looks simulated (copied beside
+    a lab CSV, or written before the seal existed) is not."""
+    stem = trial_stem(stem)
+    json_path = with_ending(stem, ".json")
     try:
         meta = json.loads(json_path.read_text(encoding="utf-8"))
     except (ValueError, UnicodeDecodeError, OSError):
         return False
-    return (isinstance(meta, dict) and isinstance(meta.get("simulation"), dict)
-            and str(meta.get("format", "")).startswith(FORMAT.split("/")[0]))
+    if not (isinstance(meta, dict) and isinstance(meta.get("simulation"), dict)
+            and str(meta.get("format", "")).startswith(FORMAT.split("/")[0])):
+        return False
+    sealed = meta["simulation"].get("csv_sha256")
+    data = [p for p in (with_ending(stem, ".csv"), with_ending(stem, ".csv.gz"))
+            if p.exists()]
+    if not data:
+        return True  # the metadata alone: nothing of a lab's is at stake beyond it
+    return isinstance(sealed, str) and all(_sha256(p) == sealed for p in data)
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def seal_simulated(csv_path: str | os.PathLike) -> None:
+    """Record the SHA-256 of a simulated trial's CSV in its JSON (``simulation.csv_sha256``)
+    so that a later simulate run replaces it only while it is that file
+    (:func:`simulated_trial`)."""
+    csv_path = Path(csv_path)
+    json_path = with_ending(trial_stem(csv_path), ".json")
+    meta = json.loads(json_path.read_text(encoding="utf-8"))
+    meta.setdefault("simulation", {})["csv_sha256"] = _sha256(csv_path)
+    atomic_write(json_path, lambda fh: fh.write(json.dumps(meta, indent=2).encode()))
 
 
 def check_trial_out(stem: str | os.PathLike, option: str = "--out", *,
@@ -438,8 +470,24 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
     if not csv_path.is_file():
         raise TrialFormatError(f"{csv_path}: data file missing")
     header, delimiter = csvtable.read_header(csv_path)
+    header = _rename_channels(header, meta, json_path, csv_path)
+    header, header_units = _header_units(header)
     arrays = _columns(csv_path, header, delimiter, meta, filled)
-    return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples)
+    return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples,
+                        units=header_units)
+
+
+def _header_units(header: list[str]) -> tuple[list[str], dict]:
+    """Column names with a stated unit split off (``theta[1] (deg)`` -> ``theta[1]``,
+    trialformat.units), and ``{column: unit}`` of those that state one."""
+    from .units import split_header
+    names, units = [], {}
+    for h in header:
+        name, unit = split_header(h)
+        names.append(name)
+        if unit is not None:
+            units[name] = unit
+    return names, units
 
 
 def mat_of_stem(path: str | os.PathLike) -> str | os.PathLike:
@@ -491,8 +539,15 @@ def folder_trials(folder: str | os.PathLike) -> list[Path]:
 
 
 def finish_trial(meta: dict, arrays: dict, name: str, filled: list, where, *,
-                 min_samples: int = MIN_SAMPLES) -> Trial:
-    """Build, check and convert a trial from its arrays (shared by the CSV and .mat readers)."""
+                 min_samples: int = MIN_SAMPLES, units: dict | None = None,
+                 units_by: str = "column header") -> Trial:
+    """Build, check and convert a trial from its arrays (shared by the CSV and .mat readers).
+
+    ``units`` ({column: unit}, from the CSV headers or the nldat ``chanUnits``; said to be
+    stated by ``units_by``) and the metadata's ``units`` key are applied first
+    (trialformat.units: converted to SI, recorded in ``units_read``)."""
+    from .units import apply_units
+    apply_units(meta, arrays, units or {}, where, by=units_by)
     trial = Trial(meta=meta, name=name, filled_defaults=filled, **arrays)
     check_trial(trial, where, min_samples=min_samples)
     exact = np.arange(trial.n_samples) / trial.fs
@@ -555,7 +610,80 @@ def _read_metadata(json_path: Path) -> tuple[dict, list[str]]:
         raise TrialFormatError(f"{json_path}: JSON does not parse: {exc}") from None
     if not isinstance(meta, dict):
         raise TrialFormatError(f"{json_path}: metadata must be a JSON object")
+    _fold_torque_sign(meta, json_path)
     return meta, complete_metadata(meta, json_path)
+
+
+def _fold_torque_sign(meta: dict, where) -> None:
+    """A top-level ``"torque_sign"`` (as an nldat sidecar writes it) is
+    ``sensors.torque_sign``, never ignored; the two disagreeing are refused."""
+    if "torque_sign" not in meta:
+        return
+    value = meta.pop("torque_sign")
+    sensors = meta.setdefault("sensors", {})
+    if not isinstance(sensors, dict):
+        return  # complete_metadata names the malformed 'sensors'
+    if "torque_sign" in sensors and sensors["torque_sign"] != value:
+        raise TrialFormatError(f"{where}: key 'torque_sign' ({value!r}) and key "
+                               f"'sensors.torque_sign' ({sensors['torque_sign']!r}) disagree; "
+                               f"state the sign once, as 'sensors.torque_sign'")
+    sensors["torque_sign"] = value
+
+
+_TARGET_COLUMN = re.compile(r"^(?:t|(?:" + "|".join(SIGNALS + ("theta_ref",))
+                            + r")\[(\d+)\])$")
+_UNIT_TAIL = re.compile(r"^(.*?)\s*([\(\[][^\)\]]*[\)\]])\s*$")
+
+
+def _rename_channels(header: list[str], meta: dict, json_path: Path, csv_path: Path
+                     ) -> list[str]:
+    """The header with the metadata's ``"channels"`` mapping applied (``{"pos": "theta[1]",
+    "ang (deg)": ...}``, a column's name, with or without its unit, to ``t``,
+    ``theta[j]``, ``tau_h[j]``, ``theta_ref[j]``, ``tau_delta[j]``, ``tau_m[j]``, or null:
+    left as an extra column); the mapping is removed from the metadata and recorded in
+    ``channels_read``.
+
+    Raises
+    ------
+    TrialFormatError
+        ``channels`` not an object, a target that is not a column of the format, or a
+        name that is not a column of the CSV (naming the key and the header).
+    """
+    channels = meta.pop("channels", None)
+    meta.pop("channels_read", None)  # an earlier reader's record (the file is renamed)
+    if channels is None:
+        return header
+    if not isinstance(channels, dict):
+        raise TrialFormatError(f"{json_path}: key 'channels' must be an object mapping a "
+                               f"column of {csv_path.name} to its name in the format, e.g. "
+                               f'{{"pos": "theta[1]"}}, got {_short(channels)}')
+    for name, target in channels.items():
+        if target is not None and not (isinstance(target, str)
+                                       and _TARGET_COLUMN.match(target)):
+            raise TrialFormatError(
+                f"{json_path}: key 'channels.{name}' must be one of t, "
+                f"{', '.join(s + '[j]' for s in SIGNALS + ('theta_ref',))} or null, got "
+                f"{_short(target)}")
+    out, used = [], set()
+    for h in header:
+        m = _UNIT_TAIL.match(h)
+        if h in channels:
+            key, tail = h, ""
+        elif m and m.group(1) in channels:
+            key, tail = m.group(1), " " + m.group(2)
+        else:
+            out.append(h)
+            continue
+        used.add(key)
+        out.append(channels[key] + tail if channels[key] is not None
+                   else h + " #ignored" if _TARGET_COLUMN.match(key) else h)
+    unknown = [k for k in channels if k not in used]
+    if unknown:
+        raise TrialFormatError(f"{json_path}: key 'channels' names {unknown}, not columns "
+                               f"of {csv_path.name} (header: "
+                               f"{csvtable.printable(', '.join(header))[:300]})")
+    meta["channels_read"] = {k: v for k, v in channels.items()}
+    return out
 
 
 _CHOICES = {("perturbation", "kind"): ("torque", "position"),

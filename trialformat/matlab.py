@@ -322,6 +322,13 @@ def _metadata(path, data, holder=None) -> dict:
         where = json_path
     else:
         where = f"{holder} variable 'meta'"
+        beside = path.with_name(path.stem + ".json")
+        csv_twin = any(path.with_name(path.stem + e).is_file() for e in (".csv", ".csv.gz"))
+        if beside.is_file() and not csv_twin:  # never silently ignored (issue 22); with
+            # a NAME.csv there, the JSON is that trial's
+            raise MatFileError(f"{beside}: not read, {holder} holds its own metadata "
+                               f"(variable 'meta'); merge its keys into 'meta', or remove "
+                               f"or rename {beside.name}")
     if isinstance(raw, dict):
         return _from_struct(raw)
     if isinstance(raw, np.ndarray) and raw.dtype.kind == "U":

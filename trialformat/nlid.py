@@ -15,8 +15,9 @@ used here:
     kept in the metadata's ``source``.
 
 Channel mapping (default): a name ``pos``, ``pos1``, ``pos2``... (also ``angle``,
-``theta``, ``position``) is the measured angle ``theta[j]`` [rad] of joint j (j the
-trailing digits, 1 if none); ``tq``, ``tq1``... (also ``torque``, ``tau``, ``trq``) is the
+``theta``, ``position``) is the measured angle ``theta[j]`` of joint j (j the
+trailing digits, 1 if none; in the units ``chanUnits`` states, converted to rad,
+trialformat.units; rad when not stated); ``tq``, ``tq1``... (also ``torque``, ``tau``, ``trq``) is the
 interaction torque ``tau_h[j]`` [N m]. The NLID lab's suffixes ``Pert``, ``Meas``,
 ``Measured``, ``Total``, ``Tot`` may follow the signal's name (``posPert1``, ``tqPert1``:
 the position perturbation and the torque in response to it; case ignored, ``_`` allowed).
@@ -389,7 +390,11 @@ def _trial(path: Path, name: str, obj, settings: dict, min_samples: int):
             arrays["extra"][c] = data[:, names.index(c)]
     meta = _metadata(path, name, props, settings, n, incr, start, names, columns)
     filled = complete_metadata(meta, where)
-    return finish_trial(meta, arrays, name, filled, f"{path}:{name}", min_samples=min_samples)
+    stated = _units(props, names)  # chanUnits, applied to the columns they name
+    units = {f"{s}[{j}]": stated[names.index(c)] for c, (s, j) in columns.items()
+             if stated[names.index(c)]}
+    return finish_trial(meta, arrays, name, filled, f"{path}:{name}", min_samples=min_samples,
+                        units=units, units_by=f"chanUnits of {name}")
 
 
 def _show(columns) -> str:

@@ -60,7 +60,7 @@ def build(r) -> DiagnosisReport:
                                for u in r.cal],
                "held_out": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
                             for u in r.held]},
-        config=r.config.to_dict(),
+        config=r.config.to_dict(), grouping=r.grouping,
         n_simulations=n_parent_sims + r.n_worker_sims,
         elapsed_s=time.perf_counter() - r.t0, trials=[t.name for t in r.trials],
         experiment={**r.experiment.describe(), "simulated_by": simulated_by(r),

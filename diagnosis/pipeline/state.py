@@ -28,6 +28,7 @@ class DiagnosisRun:
     workers: int | None = None
     scheduler: object = None
     rk4_step: float | None = None
+    grouping: str = ""             # the one line of the grouping rule (estimation.grouping)
     t0: float = field(default_factory=time.perf_counter)
     resume: object = None          # pipeline.resume.ResumeStore or None
     # read, conventions

@@ -95,3 +95,54 @@ def test_plant_choice_on_position_trials_is_said_not_used(monkeypatch):
                       r"relaxed_1 are position experiments, re-simulated by the limb model"):
         check_plant_options(r)
     assert simulated_by(r).startswith("diagnosis.limb")
+
+def _ankle_session():
+    """As ``python -m estimation.examples ankle``: two labels, one unlabelled recording."""
+    trials = [position_trial(K=80.0, B=1.2, I=0.012, duration_s=10, seed=s, condition=c,
+                             name=f"{c}_{s}")
+              for c, s in (("relaxed", 1), ("relaxed", 2), ("co-contracted", 3))]
+    trials.append(position_trial(K=80.0, B=1.2, I=0.012, duration_s=10, seed=4,
+                                 record_reference=False, name="relaxed_noref"))
+    return trials
+
+
+def test_diagnose_groups_the_readme_example_like_estimate():
+    from diagnosis.inputs import split_conditions
+    from estimation.lab import estimation_units
+    trials = _ankle_session()
+    groups = split_conditions(trials)  # was refused: relaxed_noref has no label
+    assert {k: [t.name for t in v] for k, v in groups.items()} == {
+        "relaxed": ["relaxed_1", "relaxed_2"], "co-contracted": ["co-contracted_3"],
+        "relaxed_noref": ["relaxed_noref"]}
+    units = {u.label: [t.name for t in u.trials] for u in estimation_units(trials)}
+    assert units == {k: [t.name for t in v] for k, v in groups.items()}
+
+
+def test_unlabelled_recordings_of_two_limbs_are_not_pooled_by_diagnose():
+    from diagnosis.inputs import split_conditions
+    a = position_trial(K=80.0, B=1.2, I=0.012, duration_s=10, seed=1, name="a")
+    b = position_trial(K=150.0, B=1.2, I=0.012, duration_s=10, seed=2, name="b")
+    groups = split_conditions([a, b])
+    assert [[t.name for t in g] for g in groups.values()] == [["a"], ["b"]]
+
+
+def test_a_condition_that_is_not_a_string_is_refused_by_name():
+    import pytest
+
+    from diagnosis.errors import DiagnosisInputError
+    from diagnosis.inputs import split_conditions
+    t = _ref_trial(name="x")
+    t.meta["condition"] = ["a"]
+    with pytest.raises(DiagnosisInputError, match=r"x: key 'condition' must be a string.*\[\"a\"\]"):
+        split_conditions([t])
+
+
+def test_colliding_labels_get_unique_report_folders():
+    from diagnosis.core import _safe
+    from estimation.grouping import unique_file_names
+    from estimation.labreport import safe_name
+    labels = ["day1/left", "day1_left", "Sübject", "Söbject"]
+    for safe, renamed in ((_safe, 1), (safe_name, 2)):
+        names, notes = unique_file_names(labels, safe)
+        assert len({n.lower() for n in names}) == 4, names
+        assert len(notes) == renamed and "day1_left_2" in notes[0]

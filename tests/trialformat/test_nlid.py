@@ -29,7 +29,10 @@ def _cell(strings):
 
 def _nldat(data, names, incr=0.001, comment="test"):
     return MatlabOpaque({"dataSet": np.asarray(data, dtype=float), "chanNames": _cell(names),
-                         "chanUnits": _cell(["rad", "Nm"][:len(names)]),
+                         # units in channel order (they are read: issue 22)
+                         "chanUnits": _cell([
+                             "Nm" if n.lower().startswith(("tq", "moment")) else "rad"
+                             for n in names]),
                          "domainIncr": np.array([[incr]]), "domainStart": np.array([[0.0]]),
                          "comment": np.array([comment])}, "nldat")
 
