@@ -320,19 +320,28 @@ def make_problem(lf, preps, name, fixed, cfg, unit):
     return prob
 
 
+def split_nominal(lf, prob):
+    """The nominal solve on the effect's split (limbfit._solve); sets ``prob.unit`` to
+    its calibration energy, the scale of the effect's objectives (the search's and the
+    jackknife's: a problem rebuilt from a fit's record needs the same)."""
+    with prob.split_context():
+        nom = lf._solve(prob.preps, [pr.base for pr in prob.preps])
+    prob.unit = nom.cal_energy or 1.0
+    return nom
+
+
 def fit_effect(lf, preps, name, nominal, cfg, *, intervals=True):
     """limbfit.fit_effect for a varying effect (its own split; gaps rescaled, module
     docstring). Returns a limbfit.EffectFit with ``split`` (rule, why, raw gaps)."""
     from . import catalogue as cat
     n = preps[0].n
     prob0 = make_problem(lf, preps, name, {}, cfg, nominal["solution"].cal_energy)
+    nom = split_nominal(lf, prob0)
     with prob0.split_context():
-        nom = lf._solve(preps, [pr.base for pr in preps])
         ang = [lf._angle_residual(pr, None) for pr in preps]
         limb0 = nominal["limb"]
         n_cal = lf._gap(preps, nom.residual, ang, limb0, cfg, "cal")
         n_held = lf._gap(preps, nom.residual, ang, limb0, cfg, "held")
-    prob0.unit = nom.cal_energy or 1.0
     x = prob0.search()
     params = prob0.params(x)
     obj, sol, ang = prob0.evaluate(params)
