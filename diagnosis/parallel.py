@@ -41,6 +41,10 @@ def _init_worker(state) -> None:
     _LOCAL_STATE = state
 
 
+def _ready() -> None:
+    """A no-op task: makes the pool start a worker."""
+
+
 def _call(fn, state, args):
     """Run ``fn(state, *args)`` with the worker's state (the local one when None)."""
     return fn(_LOCAL_STATE if state is None else state, *args)
@@ -81,6 +85,11 @@ class Runner:
 
             # spawn workers that ignore Ctrl-C and die with this process
             self._pool = new_pool(self.workers, initializer=_init_worker, initargs=(state,))
+            # start every worker now (the pool spawns one per submitted task): they import
+            # and unpickle the state side by side while this process goes on, instead of
+            # the second starting only when a map first has two tasks
+            for _ in range(self.workers):
+                self._pool.submit(_ready)
         self.timings.append({"phase": "start workers", "tasks": 0,
                              "wall_s": round(time.perf_counter() - t0, 3)})
 
