@@ -15,6 +15,7 @@ from diagnosis import limbfit as lf
 from diagnosis.config import DiagnosisConfig
 from diagnosis.experiments.position import PositionServo
 from diagnosis.parallel import Runner
+from diagnosis.pipeline.resume import ResumeStore
 from diagnosis.tasks import TaskState
 
 FS, N = 500.0, 12000
@@ -43,7 +44,7 @@ def _fields(fit):
             fit.model.K.tolist(), fit.model.B.tolist(), fit.model.M.tolist())
 
 
-def test_fits_on_two_workers_equal_the_one_process_fits():
+def test_fits_on_two_workers_equal_the_one_process_fits(tmp_path):
     trials = [_reflex_trial()]
     effects = ("stiffness_saturating", "torque_sensor_lag", "wobbling_mass")
     config = DiagnosisConfig()
@@ -51,9 +52,15 @@ def test_fits_on_two_workers_equal_the_one_process_fits():
     serial = exp.fit_effects(trials, effects, config)
     state = TaskState(token=uuid.uuid4().hex, trials=trials, experiment=exp, model=None,
                       config=config, plant=None, cal=[], held=[])
+    store = ResumeStore(tmp_path, "k")
     with Runner(state, workers=2) as runner:
-        parallel = exp.fit_effects(trials, effects, config, runner=runner)
+        parallel = exp.fit_effects(trials, effects, config, store=store, runner=runner)
         phases = [p for p in runner.timings if p["phase"] == "limbfit effects"]
+        # a re-run reads every fit (and the best fit's intervals) back from the store
+        again_store = ResumeStore(tmp_path, "k")
+        again = exp.fit_effects(trials, effects, config, store=again_store, runner=runner)
+    assert store.n_stored == len(effects) + 1 and again_store.n_reused == len(effects) + 1
+    assert [_fields(f) for f in again["fits"]] == [_fields(f) for f in parallel["fits"]]
     assert phases and phases[0]["tasks"] == len(effects)  # fitted on the workers
     assert serial["significant"] and len(serial["fits"]) == len(effects)
     assert serial["fits"][0].intervals  # the best fit's jackknife, from a rebuilt record
