@@ -699,6 +699,7 @@ def fit_from_record(preps, d: dict, nominal: dict, cfg: FitConfig = FitConfig())
         import sys
         prob = vary.make_problem(sys.modules[__name__], preps, name, d["fixed"], cfg,
                                  nominal["solution"].cal_energy)
+        vary.split_nominal(sys.modules[__name__], prob)  # the objective's scale of the fit
         fit.split = d.get("split")
     else:
         prob = _Problem(preps, name, d["fixed"], cfg, nominal["solution"].cal_energy)

@@ -20,6 +20,7 @@ diagnosis did.
 from __future__ import annotations
 
 import os
+import pickle
 import time
 from concurrent.futures import as_completed
 
@@ -39,6 +40,16 @@ def default_workers() -> int:
 def _init_worker(state) -> None:
     global _LOCAL_STATE
     _LOCAL_STATE = state
+
+
+def _init_worker_pickled(blob: bytes) -> None:
+    """Pool initializer: the state, pickled once by the parent, unpickled here (the
+    imports it needs run in the worker, side by side with the other workers')."""
+    _init_worker(pickle.loads(blob))
+
+
+def _ready() -> None:
+    """A no-op task: makes the pool start a worker."""
 
 
 def _call(fn, state, args):
@@ -80,7 +91,17 @@ class Runner:
             from trialformat.processes import new_pool
 
             # spawn workers that ignore Ctrl-C and die with this process
-            self._pool = new_pool(self.workers, initializer=_init_worker, initargs=(state,))
+            # the state goes as bytes: a spawned worker reads its start-up data while this
+            # process waits, and unpickling the state there imports numpy, scipy and the
+            # diagnosis (seconds): as bytes, the workers import in their initializer, side
+            # by side, while this process goes on
+            blob = pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+            self._pool = new_pool(self.workers, initializer=_init_worker_pickled,
+                                  initargs=(blob,))
+            # start every worker now (the pool spawns one per submitted task), instead of
+            # the second only when a map first has two tasks
+            for _ in range(self.workers):
+                self._pool.submit(_ready)
         self.timings.append({"phase": "start workers", "tasks": 0,
                              "wall_s": round(time.perf_counter() - t0, 3)})
 

@@ -92,3 +92,23 @@ def task_refine_pair(state: TaskState, fit: EffectFit, norms_cal: dict, norms_he
     if refined is fit:
         return fit
     return _with_held_out(refined, ev_held, n_held, ev_cal.n_dof)
+
+
+def _limbfit_setup(state: TaskState, cfg):
+    """This worker's limbfit records, prepared signals and nominal fit of the state's
+    trials (diagnosis.limbfit; built once per worker and FitConfig)."""
+    from . import limbfit as lf
+
+    def build():
+        preps = lf.prepare([lf.PositionRecord.from_trial(t) for t in state.trials], cfg)
+        return preps, lf.fit_nominal(preps, cfg)
+    return worker_cache(state, ("limbfit", repr(cfg)), build)
+
+
+def task_limbfit(state: TaskState, name: str, cfg) -> dict:
+    """A position experiment's fit of one effect (limbfit.fit_effect, no intervals) on
+    the state's trials, as its JSON-able record (limbfit.fit_record: the parent rebuilds
+    it bit for bit with limbfit.fit_from_record)."""
+    from . import limbfit as lf
+    preps, nominal = _limbfit_setup(state, cfg)
+    return lf.fit_record(lf.fit_effect(preps, name, nominal, cfg, intervals=False))

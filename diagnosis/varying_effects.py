@@ -163,18 +163,33 @@ def _switch_indicator(pr):
 
 
 def basis(pr, name, params):
-    """(N, m) basis of the varying K and B at the full rate, and (N, q) quasi-static
-    columns (state effects) or None."""
-    t = np.arange(pr.N) / pr.fs
+    """(Nd, m) basis of the varying K and B on the decimated samples of ``pr`` (every
+    D-th sample of the full rate, as the low-passed columns), and (Nd, q) quasi-static
+    columns (state effects) or None.
+
+    Each basis function is evaluated on the decimated samples only (the same values as
+    evaluating it at the full rate and keeping every D-th sample: the functions are
+    pointwise); the scheduling variable's scaling (its 1-99 % range over the whole
+    record) is computed once per record."""
+    t = (np.arange(pr.N) / pr.fs)[::pr.D][:pr.Nd]
     if name == "stiffness_saturating":
         return (1.0 - np.exp(-t / float(params["time_constant_s"])))[:, None], None
     if name == "stiffness_modulated":
         a = 2 * math.pi * t / float(params["period_s"])
         return np.stack([np.sin(a), np.cos(a)], axis=1), None
     if name == "stiffness_switching":
-        return _switch_indicator(pr)[:, None], None
-    x, _, _ = _scaled(schedule(pr, name))
+        return _switch_indicator(pr)[::pr.D][:pr.Nd, None], None
+    x = _scaled_schedule(pr, name)[::pr.D][:pr.Nd]
     return np.stack([x, x * x], axis=1), np.stack([x, x * x, x ** 3], axis=1)
+
+
+def _scaled_schedule(pr, name):
+    """(N,) the scheduling variable of ``name`` scaled to [-1, 1] over its 1-99 % range
+    (:func:`_scaled`), computed once per prepared record."""
+    cache = pr.__dict__.setdefault("_varying_scaled", {})
+    if name not in cache:
+        cache[name] = _scaled(schedule(pr, name))[0]
+    return cache[name]
 
 
 def columns(pr, name, params):
@@ -186,14 +201,12 @@ def columns(pr, name, params):
     a few samples each), so the already low-passed base columns are multiplied by the
     decimated basis instead of low-passing every product at the full rate (10-50 times
     faster on the 106 s pilot recording)."""
-    phi, quasi = basis(pr, name, params)
+    phi_d, q = basis(pr, name, params)
     n, nn = pr.n, pr.n * pr.n
-    phi_d = phi[::pr.D][:pr.Nd]
     extra = []
     for m in range(phi_d.shape[1]):
         extra.append(pr.base[:, :, :2 * nn] * phi_d[:, m, None, None])
-    if quasi is not None:
-        q = quasi[::pr.D][:pr.Nd]
+    if q is not None:
         for m in range(q.shape[1]):
             c = np.zeros((pr.Nd, n, n))
             for j in range(n):
@@ -307,19 +320,28 @@ def make_problem(lf, preps, name, fixed, cfg, unit):
     return prob
 
 
+def split_nominal(lf, prob):
+    """The nominal solve on the effect's split (limbfit._solve); sets ``prob.unit`` to
+    its calibration energy, the scale of the effect's objectives (the search's and the
+    jackknife's: a problem rebuilt from a fit's record needs the same)."""
+    with prob.split_context():
+        nom = lf._solve(prob.preps, [pr.base for pr in prob.preps])
+    prob.unit = nom.cal_energy or 1.0
+    return nom
+
+
 def fit_effect(lf, preps, name, nominal, cfg, *, intervals=True):
     """limbfit.fit_effect for a varying effect (its own split; gaps rescaled, module
     docstring). Returns a limbfit.EffectFit with ``split`` (rule, why, raw gaps)."""
     from . import catalogue as cat
     n = preps[0].n
     prob0 = make_problem(lf, preps, name, {}, cfg, nominal["solution"].cal_energy)
+    nom = split_nominal(lf, prob0)
     with prob0.split_context():
-        nom = lf._solve(preps, [pr.base for pr in preps])
         ang = [lf._angle_residual(pr, None) for pr in preps]
         limb0 = nominal["limb"]
         n_cal = lf._gap(preps, nom.residual, ang, limb0, cfg, "cal")
         n_held = lf._gap(preps, nom.residual, ang, limb0, cfg, "held")
-    prob0.unit = nom.cal_energy or 1.0
     x = prob0.search()
     params = prob0.params(x)
     obj, sol, ang = prob0.evaluate(params)

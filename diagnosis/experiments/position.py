@@ -102,7 +102,7 @@ class PositionServo(Experiment):
         return simulate
 
     # ------------------------------------------------------------------ fits
-    def fit_effects(self, trials, effects, config, store=None):
+    def fit_effects(self, trials, effects, config, store=None, runner=None):
         """Which / how far for a position experiment: every applicable effect fitted by
         variable projection (diagnosis.limbfit: K, B, I and the effect's gain-like
         parameters linear, the others searched), calibrated on the first
@@ -113,6 +113,12 @@ class PositionServo(Experiment):
         best fit's intervals, are written to it atomically as they finish and read back
         by a re-run with the same inputs and options (the store's key), which then fits
         only what is missing and gives the same report.
+
+        ``runner`` (diagnosis.parallel.Runner, optional; the diagnosis's, whose state
+        holds these ``trials``): with more than one worker the effects are fitted on the
+        workers (diagnosis.tasks.task_limbfit), the costliest first, each returned as the
+        record a resume store keeps (limbfit.fit_record) and rebuilt here bit for bit;
+        without one, or with one worker, in this process. The result is the same.
 
         Returns
         -------
@@ -133,12 +139,15 @@ class PositionServo(Experiment):
         significant = bool(g["all"].significant(cfg))
         # effects are fitted only when there is a gap to explain (as limbfit does)
         names = lf.candidates(preps, effects) if effects and significant else []
-        fits = [_resumable(store, ("limbfit", nm, repr(cfg)),
-                           lambda nm=nm: lf.fit_effect(preps, nm, nominal, cfg,
-                                                       intervals=False),
-                           lf.fit_record,
-                           lambda d: lf.fit_from_record(preps, d, nominal, cfg))
-                for nm in names]
+        if _parallel(runner, trials, names):
+            fits = _fit_on_workers(runner, names, preps, nominal, cfg, store)
+        else:
+            fits = [_resumable(store, ("limbfit", nm, repr(cfg)),
+                               lambda nm=nm: lf.fit_effect(preps, nm, nominal, cfg,
+                                                           intervals=False),
+                               lf.fit_record,
+                               lambda d: lf.fit_from_record(preps, d, nominal, cfg))
+                    for nm in names]
         fits.sort(key=lambda f: f.calibration_objective)
         from .. import varying_effects as vary
         fits = vary.prefer_simpler(fits, cfg.name_reduction)  # nesting: the simpler first
@@ -178,6 +187,72 @@ class PositionServo(Experiment):
                 "measure": "limbfit: band energy of the torque residual above the noise "
                            "floor, relative to the torque energy (diagnosis.limbfit)",
                 "nominal_limb": model_of(nominal["limb"], trials[0].fs, "limbfit nominal")}
+
+
+def _parallel(runner, trials, names) -> bool:
+    """Fit on the runner's workers: more than one worker (or a cluster), more than one
+    effect, and the runner's state holds these very trials (the tasks read them there)."""
+    if runner is None or len(names) < 2:
+        return False
+    if getattr(runner, "workers", 1) < 2 and getattr(runner, "_client", None) is None:
+        return False
+    held = getattr(getattr(runner, "state", None), "trials", None)
+    return held is not None and len(held) == len(trials) and all(
+        a is b for a, b in zip(held, trials))
+
+
+def _fit_cost(name, cfg) -> float:
+    """A rough cost of fitting ``name`` (grid points times discrete choices): the
+    workers take the costliest first so that none is left with a long fit at the end."""
+    from .. import catalogue as cat
+    from .. import limbfit as lf
+    from .. import varying_effects as vary
+    nl = len(lf._nonlinear(name))
+    if name == "stiffness_modulated":
+        return float(vary.PERIOD_GRID)
+    grid = cfg.grid if nl == 1 else max(6, int(cfg.grid * 1.3))
+    choices = 1
+    for values in (cat.get_effect(name).choices or {}).values():
+        choices *= len(values)
+    return float(grid ** nl * choices)
+
+
+def _fit_on_workers(runner, names, preps, nominal, cfg, store):
+    """The fits of ``names`` (in that order) made on the runner's workers; those a
+    resume store holds are read back, each new one stored as it finishes."""
+    from .. import limbfit as lf
+    from ..tasks import task_limbfit
+    keys = {nm: ("limbfit", nm, repr(cfg)) for nm in names}
+    records = {}
+    if store is not None:
+        for nm in names:
+            found = store.get_json(keys[nm])
+            if found is not None:
+                records[nm] = found
+    todo = sorted((nm for nm in names if nm not in records),
+                  key=lambda nm: -_fit_cost(nm, cfg))
+
+    def done(i, record):
+        if store is not None:
+            store.put_json(keys[todo[i]], record)
+
+    results = runner.map(task_limbfit, [(nm, cfg) for nm in todo], desc="limbfit effects",
+                         done=done)
+    fits = []
+    for nm in names:
+        if nm in records:
+            try:
+                fits.append(lf.fit_from_record(preps, records[nm], nominal, cfg))
+                store.n_reused += 1
+                continue
+            except (KeyError, ValueError, TypeError):
+                pass  # another layout: fit again, here
+            fit = lf.fit_effect(preps, nm, nominal, cfg, intervals=False)
+            store.put_json(keys[nm], lf.fit_record(fit))
+            fits.append(fit)
+        else:
+            fits.append(lf.fit_from_record(preps, results[todo.index(nm)], nominal, cfg))
+    return fits
 
 
 def _resumable(store, key, compute, to_json, from_json):
