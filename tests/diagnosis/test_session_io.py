@@ -95,3 +95,15 @@ def test_plant_choice_on_position_trials_is_said_not_used(monkeypatch):
                       r"relaxed_1 are position experiments, re-simulated by the limb model"):
         check_plant_options(r)
     assert simulated_by(r).startswith("diagnosis.limb")
+
+
+def test_diagnose_refuses_a_read_only_out_before_any_work(tmp_path):
+    read_only = tmp_path / "archive"
+    read_only.mkdir()
+    read_only.chmod(0o555)
+    from diagnosis.errors import DiagnosisInputError
+    from diagnosis.pipeline.report import check_out_dir
+    with pytest.raises(DiagnosisInputError, match="read-only"):
+        check_out_dir(read_only, tmp_path / "trials")
+    assert list(read_only.iterdir()) == []
+    read_only.chmod(0o755)
