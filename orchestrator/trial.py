@@ -17,7 +17,7 @@ from trialformat import reference as ref
 
 from .controller import IMBIC
 from .effects import parse_effects
-from .errors import FMUCallError, RateError, SetupError
+from .errors import DivergenceError, FMUCallError, RateError, SetupError
 from .master import DelayLine, Recorder, Sampler, check_angles, run_closed_loop, run_open_loop
 from .perturbation import make_perturbation
 from .plant import Plant
@@ -177,17 +177,17 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
     delay = DelayLine(hidden.delay_samples, n) if hidden.delay_samples else None
     recorder = Recorder(("measured", "tau_m"))
     condition = _condition(name, setup, perturbed_dof, pert_meta, hidden.normalized)
-    with _gc_paused():
+    with _gc_paused(), _held_inputs_named(plant):
         try:
             run_closed_loop(plant.io, controller, sampler, tau_delta.tolist(), recorder,
                             control_period=ts, n_decimation=n_dec, delay=delay,
                             condition=condition, human=human)
         except FMUCallError as exc:
             raise plant.log.explain(exc) from exc
-    rec = recorder.arrays()
-    rec = {"tau_delta": tau_delta, "theta": rec["measured"][:, :n],
-           "tau_h": rec["measured"][:, n:], "tau_m": rec["tau_m"]}
-    check_angles(rec["theta"], condition, ts)
+        rec = recorder.arrays()
+        rec = {"tau_delta": tau_delta, "theta": rec["measured"][:, :n],
+               "tau_h": rec["measured"][:, n:], "tau_m": rec["tau_m"]}
+        check_angles(rec["theta"], condition, ts)
 
     meta = setup.to_metadata()
     meta.update(perturbed_dof=perturbed_dof, perturbation=pert_meta,
@@ -360,6 +360,22 @@ def _sampler(setup, hidden, seed, n_samples):
     sampler = Sampler(setup.n_dof, np.radians(float(enc_deg)), float(tau_res),
                       theta_noise, tau_noise)
     return sampler, noise_seed
+
+
+@contextlib.contextmanager
+def _held_inputs_named(plant):
+    """A divergence of a plant with inputs outside the contract held at their start values
+    names them: an enable input left at 0 is a likely cause, and the fix is an option."""
+    try:
+        yield
+    except DivergenceError as exc:
+        held = getattr(plant, "held_inputs", None)
+        if not held:
+            raise
+        shown = ", ".join(f"{k} = {v}" for k, v in held.items())
+        raise DivergenceError(f"{exc}; the plant's input(s) outside the contract were held at "
+                              f"their start values ({shown}): if one disables or changes the "
+                              f"plant, set it with --plant-parameter NAME=VALUE") from None
 
 
 def _condition(name, setup, perturbed_dof, pert_meta, effects) -> str:
