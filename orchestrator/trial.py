@@ -33,6 +33,38 @@ PLANT_KINDS = ("c", "modelica")
 PLANT_ENV = "ARMEXO_PLANT"
 
 
+#: plant parameters (or inputs outside the contract) set for every trial of a run, as a
+#: JSON object ``{"NAME": value}``: ``armimp diagnose --plant-parameter`` (its workers
+#: inherit it, as they inherit ARMEXO_PLANT)
+PLANT_PARAMETERS_ENV = "ARMEXO_PLANT_PARAMETERS"
+
+
+def env_plant_parameters() -> dict:
+    """The parameters of ``$ARMEXO_PLANT_PARAMETERS`` (empty when unset).
+
+    Raises
+    ------
+    SetupError
+        Not a JSON object of finite numbers (named).
+    """
+    import json
+    import math
+
+    text = os.environ.get(PLANT_PARAMETERS_ENV)
+    if not text:
+        return {}
+    try:
+        values = json.loads(text)
+    except ValueError:
+        values = None
+    if not isinstance(values, dict) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            for v in values.values()):
+        raise SetupError(f"{PLANT_PARAMETERS_ENV} = {text!r}: expected a JSON object of "
+                         f"finite numbers, e.g. {{\"motor_enable\": 1}}")
+    return {str(k): float(v) for k, v in values.items()}
+
+
 def plant_kind(choice: str | None = None) -> str:
     """The built-in plant to use: ``choice``, else ``$ARMEXO_PLANT``, else ``"c"``.
 
@@ -134,7 +166,9 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
     plant : Plant or path, optional
         The plant FMU (default: the reference C plant, one cached instance per thread).
     parameters : dict, optional
-        Extra FMU parameters by name (refused when the plant lacks one).
+        Extra FMU parameters by name (refused when the plant lacks one), over those of
+        ``$ARMEXO_PLANT_PARAMETERS`` (:func:`env_plant_parameters`: ``armimp diagnose
+        --plant-parameter``, inherited by the workers).
     communication_step_s : float [s], optional
         Communication step (default: the control period); it must divide the period.
     name : str
@@ -168,6 +202,7 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
         raise SetupError(f"plant {plant.path.name} has {plant.n_dof} joints, the set-up {n}")
     n_dec = plant.decimation(ts, communication_step_s)
     required = dict(hidden.plant_parameters)
+    required.update(env_plant_parameters())
     required.update(parameters or {})
     _choose_rk4_step(plant, required, ts / n_dec)
     absent = plant.start(required, optional=setup.plant_parameters())
@@ -411,6 +446,7 @@ def simulate_plant(setup, tau_applied, *, plant=None, effects=None, parameters=N
     plant = _resolve_plant(plant, setup.n_dof)
     hidden = parse_effects(effects, setup.n_dof)
     required = dict(hidden.plant_parameters)
+    required.update(env_plant_parameters())
     required.update(parameters or {})
     plant.start(required, optional=setup.plant_parameters())
     recorder = Recorder(("outputs",))
