@@ -7,6 +7,7 @@ Only argument parsing lives here; the work is done by :func:`diagnosis.diagnose`
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 
 from trialformat.cliargs import MAX_SAMPLES, number
@@ -36,6 +37,11 @@ def register(subparsers) -> None:
                    help="the scheduling variable the limb changes with: an extra column or "
                         "nldat variable (sv), time, angle or angle[j]; as metadata "
                         "'scheduling', which it overrides (trialformat.scheduling)")
+    p.add_argument("--plant-parameter", action="append", default=None, metavar="NAME=VALUE",
+                   type=_name_value,
+                   help="set a plant parameter, or an input outside the contract (listed by "
+                        "'armimp info', e.g. motor_enable=1), in every simulation; "
+                        "repeatable")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_diagnose)
 
@@ -71,13 +77,41 @@ def _effects(text):
     return names
 
 
+def _name_value(text):
+    from orchestrator.cli import _name_value as parse
+    return parse(text)
+
+
+@contextlib.contextmanager
+def _plant_parameters(pairs):
+    """``--plant-parameter`` for the run: in the environment every simulation reads (the
+    workers inherit it), restored afterwards."""
+    import json
+    import os
+
+    from orchestrator.trial import PLANT_PARAMETERS_ENV
+    if not pairs:
+        yield
+        return
+    before = os.environ.get(PLANT_PARAMETERS_ENV)
+    os.environ[PLANT_PARAMETERS_ENV] = json.dumps(dict(pairs))
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(PLANT_PARAMETERS_ENV, None)
+        else:
+            os.environ[PLANT_PARAMETERS_ENV] = before
+
+
 def _diagnose(args) -> int:
     from .core import DiagnosisConfig, diagnose
     config = DiagnosisConfig(effects=_effects(args.effects))
-    report = diagnose(args.folder, args.out, config=config, plant=args.fmu,
-                      progress=not args.quiet, workers=args.workers,
-                      scheduler=args.scheduler, rk4_step=args.rk4_step,
-                      scheduling=args.scheduling)
+    with _plant_parameters(args.plant_parameter):
+        report = diagnose(args.folder, args.out, config=config, plant=args.fmu,
+                          progress=not args.quiet, workers=args.workers,
+                          scheduler=args.scheduler, rk4_step=args.rk4_step,
+                          scheduling=args.scheduling)
     if getattr(report, "grouping", None):
         print(report.grouping)
     reports = getattr(report, "reports", None) or {None: report}

@@ -524,6 +524,7 @@ class Plant:
         self._closed = False
         self._reset_unusable = ""     # why reset cannot be trusted ("" while it can)
         self._warned_inputs = False   # inputs outside the contract left at start: said once
+        self.held_inputs = {}         # those of the last start()
         self.reinstantiated = 0
         self.log = PlantLog()
         try:
@@ -615,6 +616,7 @@ class Plant:
         values = {k: v for k, v in optional.items() if k in self.parameters}
         values.update(parameters)
         unset = {k: v for k, v in self.extra_inputs.items() if k not in values}
+        self.held_inputs = unset  # named again if the loop then diverges
         if unset and not self._warned_inputs:
             self._warned_inputs = True
             warnings.warn(f"{self.path.name}: input(s) outside the contract held at their start "

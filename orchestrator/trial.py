@@ -17,7 +17,7 @@ from trialformat import reference as ref
 
 from .controller import IMBIC
 from .effects import parse_effects
-from .errors import FMUCallError, RateError, SetupError
+from .errors import DivergenceError, FMUCallError, RateError, SetupError
 from .master import DelayLine, Recorder, Sampler, check_angles, run_closed_loop, run_open_loop
 from .perturbation import make_perturbation
 from .plant import Plant
@@ -31,6 +31,38 @@ _local = threading.local()
 #: by the environment variable ARMEXO_PLANT (``armimp --plant``), else "c".
 PLANT_KINDS = ("c", "modelica")
 PLANT_ENV = "ARMEXO_PLANT"
+
+
+#: plant parameters (or inputs outside the contract) set for every trial of a run, as a
+#: JSON object ``{"NAME": value}``: ``armimp diagnose --plant-parameter`` (its workers
+#: inherit it, as they inherit ARMEXO_PLANT)
+PLANT_PARAMETERS_ENV = "ARMEXO_PLANT_PARAMETERS"
+
+
+def env_plant_parameters() -> dict:
+    """The parameters of ``$ARMEXO_PLANT_PARAMETERS`` (empty when unset).
+
+    Raises
+    ------
+    SetupError
+        Not a JSON object of finite numbers (named).
+    """
+    import json
+    import math
+
+    text = os.environ.get(PLANT_PARAMETERS_ENV)
+    if not text:
+        return {}
+    try:
+        values = json.loads(text)
+    except ValueError:
+        values = None
+    if not isinstance(values, dict) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            for v in values.values()):
+        raise SetupError(f"{PLANT_PARAMETERS_ENV} = {text!r}: expected a JSON object of "
+                         f"finite numbers, e.g. {{\"motor_enable\": 1}}")
+    return {str(k): float(v) for k, v in values.items()}
 
 
 def plant_kind(choice: str | None = None) -> str:
@@ -134,7 +166,9 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
     plant : Plant or path, optional
         The plant FMU (default: the reference C plant, one cached instance per thread).
     parameters : dict, optional
-        Extra FMU parameters by name (refused when the plant lacks one).
+        Extra FMU parameters by name (refused when the plant lacks one), over those of
+        ``$ARMEXO_PLANT_PARAMETERS`` (:func:`env_plant_parameters`: ``armimp diagnose
+        --plant-parameter``, inherited by the workers).
     communication_step_s : float [s], optional
         Communication step (default: the control period); it must divide the period.
     name : str
@@ -168,6 +202,7 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
         raise SetupError(f"plant {plant.path.name} has {plant.n_dof} joints, the set-up {n}")
     n_dec = plant.decimation(ts, communication_step_s)
     required = dict(hidden.plant_parameters)
+    required.update(env_plant_parameters())
     required.update(parameters or {})
     _choose_rk4_step(plant, required, ts / n_dec)
     absent = plant.start(required, optional=setup.plant_parameters())
@@ -177,17 +212,17 @@ def simulate_trial(setup, *, perturbed_dof, perturbation=None, level=3, seed=0,
     delay = DelayLine(hidden.delay_samples, n) if hidden.delay_samples else None
     recorder = Recorder(("measured", "tau_m"))
     condition = _condition(name, setup, perturbed_dof, pert_meta, hidden.normalized)
-    with _gc_paused():
+    with _gc_paused(), _held_inputs_named(plant):
         try:
             run_closed_loop(plant.io, controller, sampler, tau_delta.tolist(), recorder,
                             control_period=ts, n_decimation=n_dec, delay=delay,
                             condition=condition, human=human)
         except FMUCallError as exc:
             raise plant.log.explain(exc) from exc
-    rec = recorder.arrays()
-    rec = {"tau_delta": tau_delta, "theta": rec["measured"][:, :n],
-           "tau_h": rec["measured"][:, n:], "tau_m": rec["tau_m"]}
-    check_angles(rec["theta"], condition, ts)
+        rec = recorder.arrays()
+        rec = {"tau_delta": tau_delta, "theta": rec["measured"][:, :n],
+               "tau_h": rec["measured"][:, n:], "tau_m": rec["tau_m"]}
+        check_angles(rec["theta"], condition, ts)
 
     meta = setup.to_metadata()
     meta.update(perturbed_dof=perturbed_dof, perturbation=pert_meta,
@@ -362,6 +397,22 @@ def _sampler(setup, hidden, seed, n_samples):
     return sampler, noise_seed
 
 
+@contextlib.contextmanager
+def _held_inputs_named(plant):
+    """A divergence of a plant with inputs outside the contract held at their start values
+    names them: an enable input left at 0 is a likely cause, and the fix is an option."""
+    try:
+        yield
+    except DivergenceError as exc:
+        held = getattr(plant, "held_inputs", None)
+        if not held:
+            raise
+        shown = ", ".join(f"{k} = {v}" for k, v in held.items())
+        raise DivergenceError(f"{exc}; the plant's input(s) outside the contract were held at "
+                              f"their start values ({shown}): if one disables or changes the "
+                              f"plant, set it with --plant-parameter NAME=VALUE") from None
+
+
 def _condition(name, setup, perturbed_dof, pert_meta, effects) -> str:
     levels = setup.levels
     parts = [name] if name else []
@@ -395,6 +446,7 @@ def simulate_plant(setup, tau_applied, *, plant=None, effects=None, parameters=N
     plant = _resolve_plant(plant, setup.n_dof)
     hidden = parse_effects(effects, setup.n_dof)
     required = dict(hidden.plant_parameters)
+    required.update(env_plant_parameters())
     required.update(parameters or {})
     plant.start(required, optional=setup.plant_parameters())
     recorder = Recorder(("outputs",))

@@ -219,7 +219,11 @@ def atomic_write(path: str | os.PathLike, write) -> None:
     The file ends with mode 0666 masked by the process umask.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except PermissionError:  # named as the user knows it, not by the temporary name
+        raise OutputError(f"{path}: cannot write in {path.parent} (permission denied): give "
+                          f"a path in a writable folder") from None
     try:
         with os.fdopen(fd, "wb") as fh:
             write(fh)
@@ -263,13 +267,31 @@ def check_out_parent(path: str | os.PathLike, option: str = "--out") -> None:
         Naming ``option``, ``path`` and the file in the way.
     """
     path = Path(path)
+    if path.is_dir() and read_only(path):
+        raise OutputError(f"{option} {path}: the folder is read-only (mode "
+                          f"{path.stat().st_mode & 0o777:o}); it is left as it is: make it "
+                          f"writable (chmod u+w) or give another folder")
     for parent in path.parents:
         if parent.exists() or parent.is_symlink():
             if not parent.is_dir():
                 what = "a file" if parent.exists() else "a link to nothing"
                 raise OutputError(f"{option} {path}: {parent} is {what}, not a folder; give "
                                   f"a path in a folder (e.g. {parent.parent / path.name})")
+            if read_only(parent):
+                raise OutputError(f"{option} {path}: cannot write in {parent} (read-only, "
+                                  f"mode {parent.stat().st_mode & 0o777:o}): give a path in "
+                                  f"a writable folder")
             return
+
+
+def read_only(folder: Path) -> bool:
+    """True for a folder this process may not write in, or whose mode grants no write
+    (a folder a user protected, refused even where the process could override it)."""
+    try:
+        mode = folder.stat().st_mode
+    except OSError:
+        return False
+    return not os.access(folder, os.W_OK | os.X_OK) or not mode & 0o222
 
 
 def simulated_trial(stem: str | os.PathLike) -> bool:

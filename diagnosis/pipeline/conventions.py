@@ -63,11 +63,12 @@ def check_plant_options(r) -> None:
     import os
     import warnings
 
-    from orchestrator.trial import PLANT_ENV
-    if os.environ.get(PLANT_ENV):  # --plant, or the variable a lab exported for all runs
-        warnings.warn(f"--plant / ${PLANT_ENV} = {os.environ[PLANT_ENV]} is not used: trials "
-                      f"{names} are {r.experiment.kind} experiments, re-simulated by {what}",
-                      stacklevel=2)
+    from orchestrator.trial import PLANT_ENV, PLANT_PARAMETERS_ENV
+    for option, env in (("--plant", PLANT_ENV), ("--plant-parameter", PLANT_PARAMETERS_ENV)):
+        if os.environ.get(env):  # the option, or a variable a lab exported for all runs
+            warnings.warn(f"{option} / ${env} = {os.environ[env]} is not used: trials "
+                          f"{names} are {r.experiment.kind} experiments, re-simulated by "
+                          f"{what}", stacklevel=2)
 
 
 def check_rk4_divides(r) -> None:

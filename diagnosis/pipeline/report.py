@@ -78,10 +78,12 @@ def simulated_by(r) -> str:
         return {"position": "diagnosis.limb (the limb model driven by the measured angle)",
                 "rendered": "the rendered impedance M_rd, B_rd, K_rd"}.get(
             r.experiment.kind, type(r.experiment).__name__)
+    from orchestrator.trial import env_plant_parameters, plant_kind
+    values = env_plant_parameters()
+    shown = "" if not values else " with " + ", ".join(f"{k} = {v:g}" for k, v in values.items())
     if r.plant is not None:
-        return f"plant FMU {getattr(r.plant, 'path', r.plant)}"
-    from orchestrator.trial import plant_kind
-    return f"built-in plant: {plant_kind()}"
+        return f"plant FMU {getattr(r.plant, 'path', r.plant)}{shown}"
+    return f"built-in plant: {plant_kind()}{shown}"
 
 
 FEATURE_MEASURE = ("features: mean squared normalised difference of the FRF, noise, static "

@@ -50,6 +50,10 @@ def run_key(trials, config, plant, rk4_step) -> str:
         st = p.stat() if p.is_file() else None
         h.update(f"{p.resolve()}:{st and (st.st_size, st.st_mtime_ns)}".encode())
     h.update(repr(rk4_step).encode())
+    from orchestrator.trial import env_plant_parameters
+    values = env_plant_parameters()  # --plant-parameter: other parameters, other runs
+    if values:
+        h.update(json.dumps(values, sort_keys=True).encode())
     return h.hexdigest()
 
 

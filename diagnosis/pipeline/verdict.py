@@ -58,8 +58,9 @@ def run(r) -> None:
         summary += (" Numerical: the plant's RK4 step failed on "
                     + ", ".join(f"{n['trial']} at {n['failed_rk4_step']:.3g} s"
                                 for n in r.numerics)
-                    + f" and was run at {r.numerics[0]['rk4_step']:.3g} s (a numerical "
-                    "failure, not a model mismatch).")
+                    + f" and was run at {r.rk4_step or r.numerics[0]['rk4_step']:.3g} s (a "
+                    "numerical failure, not a model mismatch); every candidate model was "
+                    "run at that step too.")
     mismatches = [f for f in r.findings if not f.name.startswith("declared") and not f.note]
     # a corrected storage/clock finding is told beside the verdict on the gap, never
     # instead of it (issue 21, item 7)

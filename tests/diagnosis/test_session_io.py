@@ -146,3 +146,15 @@ def test_colliding_labels_get_unique_report_folders():
         names, notes = unique_file_names(labels, safe)
         assert len({n.lower() for n in names}) == 4, names
         assert len(notes) == renamed and "day1_left_2" in notes[0]
+
+
+def test_diagnose_refuses_a_read_only_out_before_any_work(tmp_path):
+    read_only = tmp_path / "archive"
+    read_only.mkdir()
+    read_only.chmod(0o555)
+    from diagnosis.errors import DiagnosisInputError
+    from diagnosis.pipeline.report import check_out_dir
+    with pytest.raises(DiagnosisInputError, match="read-only"):
+        check_out_dir(read_only, tmp_path / "trials")
+    assert list(read_only.iterdir()) == []
+    read_only.chmod(0o755)

@@ -208,3 +208,31 @@ def test_report_json_has_indistinguishable_beside_named_effects(tmp_path):
                           pairs=[], gap={}, where={}, arm={}, split={}, config={},
                           n_simulations=0, elapsed_s=0.0, trials=[])
     assert rep.to_dict()["indistinguishable"] == []
+
+
+def test_every_candidate_starts_from_the_step_the_nominal_needed():
+    """Stiff LuGre (sigma0 1e6): the nominal was retried at a smaller RK4 step, but the
+    candidates started again at the default step, diverged at their torque limit (not
+    retried) and were scored -inf."""
+    from types import SimpleNamespace
+
+    from diagnosis.parallel import Runner
+    from diagnosis.pipeline.nominal import _keep_retry_step
+    from diagnosis.tasks import TaskState
+    made = []
+    experiment = SimpleNamespace(simulator=lambda model, plant, rk4_step: made.append(rk4_step))
+    state = TaskState(token="t0", trials=[], experiment=experiment, model=None, config=None,
+                      plant=None, cal=[], held=[])
+    r = SimpleNamespace(rk4_step=None, state=state, workers=1, scheduler=None,
+                        progress=False,
+                        numerics=[{"trial": "a", "rk4_step": 5e-7, "failed_rk4_step": 1e-5},
+                                  {"trial": "b", "rk4_step": 1e-7, "failed_rk4_step": 1e-5}])
+    r.runner = Runner(state, workers=1, progress=False)
+    r.runner.timings.append({"phase": "nominal runs"})
+    _keep_retry_step(r)
+    assert r.rk4_step == pytest.approx(1e-7)
+    assert r.state.rk4_step == pytest.approx(1e-7) and r.state.token != "t0"
+    assert r.runner.state is r.state and r.runner.timings[1] == {"phase": "nominal runs"}
+    r.runner.state.simulator()
+    assert made == [pytest.approx(1e-7)]
+    r.runner.close()

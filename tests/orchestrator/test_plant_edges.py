@@ -20,7 +20,7 @@ from orchestrator import (ContractError, FMUCallError, Plant, PlantFileError, Pl
                           Setup, run_grid, simulate_trial)
 from orchestrator import plant as plant_module
 from orchestrator.cli import main as cli_main
-from orchestrator.errors import ParameterError
+from orchestrator.errors import DivergenceError, ParameterError
 
 pytestmark = pytest.mark.skipif(not have_compiler(), reason="no C compiler")
 
@@ -239,8 +239,9 @@ def test_input_outside_the_contract_is_listed_by_info_and_can_be_set(swap, capsy
                                               r"motor_enable = 0\.0"):
             try:
                 simulate_trial(setup, perturbed_dof=1, duration_s=0.5, plant=plant, seed=4)
-            except Exception:
-                pass  # the loop may diverge with the motor off; the warning said why
+            except DivergenceError as exc:  # the motor off: the error names the input too
+                assert "held at their start values (motor_enable = 0.0): if one disables" \
+                    in str(exc) and "--plant-parameter NAME=VALUE" in str(exc), str(exc)
     for sig in ("theta", "tau_h", "tau_m"):
         np.testing.assert_array_equal(enabled.signal(sig), nominal.signal(sig), err_msg=sig)
     assert enabled.meta["simulation"]["parameters"] == {"motor_enable": 1.0}
@@ -344,3 +345,28 @@ def test_contract_plant_lists_no_extra_inputs(swap, capsys):
     assert cli_main(["info", str(swap("nominal"))]) == 0
     out = capsys.readouterr().out
     assert "outside the contract" not in out
+
+
+def test_plant_parameters_from_the_environment_reach_every_trial(swap, monkeypatch):
+    """armimp diagnose --plant-parameter sets ARMEXO_PLANT_PARAMETERS (its workers inherit
+    it): the motor enabled, the trial is the nominal plant's."""
+    from orchestrator.errors import SetupError
+    from orchestrator.trial import env_plant_parameters
+    setup = Setup.reference(0, 0)
+    with Plant(swap("nominal")) as plant:
+        nominal = simulate_trial(setup, perturbed_dof=1, duration_s=0.3, plant=plant, seed=4)
+    monkeypatch.setenv("ARMEXO_PLANT_PARAMETERS", '{"motor_enable": 1}')
+    with Plant(swap("motor_enable")) as plant:
+        enabled = simulate_trial(setup, perturbed_dof=1, duration_s=0.3, plant=plant, seed=4)
+    np.testing.assert_array_equal(enabled.signal("tau_h"), nominal.signal("tau_h"))
+    monkeypatch.setenv("ARMEXO_PLANT_PARAMETERS", '{"motor_enable": "on"}')
+    with pytest.raises(SetupError, match=r"ARMEXO_PLANT_PARAMETERS = .*expected a JSON "
+                       r"object of finite numbers"):
+        env_plant_parameters()
+
+
+def test_diagnose_takes_plant_parameter(monkeypatch):
+    from orchestrator.cli import build_parser
+    args = build_parser().parse_args(["diagnose", "trials", "--out", "r",
+                                      "--plant-parameter", "motor_enable=1"])
+    assert args.plant_parameter == [("motor_enable", 1.0)]
