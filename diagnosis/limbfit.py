@@ -661,7 +661,8 @@ def fit_effect(preps, name: str, nominal: dict, cfg: FitConfig = FitConfig(), *,
     out_params.update({k: params[k] for k in effect.choices})
     bound = cat.at_search_bound(name, out_params)
     if any(v < 0 for k, v in lin.items()):
-        bound = bound + [f"{k} = {v:.4g} < 0 (unphysical)" for k, v in lin.items() if v < 0]
+        bound = bound + [f for f in (f"{k} = {v:.4g} < 0 (unphysical)"
+                                     for k, v in lin.items() if v < 0) if f not in bound]
     fit = EffectFit(name, out_params, ci, limb, obj, g_cal.value, g_held.value,
                     reduction, bound, n_eval)
     fit._problem = (prob, x, lin)

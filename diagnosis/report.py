@@ -192,6 +192,11 @@ def markdown(report) -> str:
                   "rows: the default split below):", ""]
         lines += [f"- {' + '.join(r['effects'])}: {r['split']['rule']} ({r['split']['why']})"
                   for r in splits]
+    widened = [w for r in report.ranking + report.pairs for w in r.get("widened", [])]
+    if widened:
+        lines += ["", "Search ranges widened (a best fit on a bound of its range, inside "
+                  "the parameter's physical limits):", ""] + \
+            [f"- {w}" for w in dict.fromkeys(widened)]
     lines += [f"- {' + '.join(r['effects'])} ranked above {'; '.join(r['preferred_over'])}: "
               f"the simpler (nested) effect is preferred" for r in report.ranking
               if r.get("preferred_over")]

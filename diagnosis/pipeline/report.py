@@ -140,7 +140,18 @@ def _row_in_units(row: dict, rho: float) -> dict:
     if row.get("flag_notes") is not None:  # the flags with the values shown beside them
         from ..fitting import format_flags
         row["at_search_bound"] = format_flags(row["flag_notes"], row["params"])
+    if row.get("widenings"):  # the ranges searched, in the file's units too
+        from ..fitting import widening_note
+        row["widened"] = [widening_note(*w, scale=_param_scale(w[0], w[1], rho))
+                          for w in row["widenings"]]
+        row["searched"] = _effects_in_units(row.get("searched") or {}, rho)
     return row
+
+
+def _param_scale(effect: str, param: str, rho: float) -> float:
+    """rho for an impedance-like parameter (IMPEDANCE_UNITS), else 1."""
+    units = {p.name: p.unit for p in cat.get_effect(effect).parameters}
+    return rho if units.get(param) in IMPEDANCE_UNITS else 1.0
 
 
 def run(r) -> None:
