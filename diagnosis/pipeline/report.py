@@ -198,6 +198,8 @@ def _param_scale(effect: str, param: str, rho: float) -> float:
 def run(r) -> None:
     """Fill ``r.report``; write it when ``r.out_dir`` is set (atomically, see
     :func:`write_atomically`)."""
+    from .when import add_named
+    add_named(r)  # the named model's gap per time block, beside the nominal's
     r.report = build(r)
     if r.out_dir is not None:
         r.report.out_dir = Path(r.out_dir)

@@ -80,3 +80,17 @@ def test_an_exoskeleton_named_model_keeps_the_estimated_arm_and_says_so():
     assert nm["limb_refitted"] is False
     assert nm["K"] == [[40.0, 38.0, 42.0], [20.0, 19.0, 21.0]]
     assert nm["effects"] == {"gravity": {"tilt_deg": [40.0, None, None]}}
+
+
+def test_the_gap_in_time_gives_the_named_models_gap_beside_the_nominal(report):
+    """Issue 20: each time block's feature gap with the named model beside the nominal's;
+    the reflex is there all the time, so the named model closes the gap in every block."""
+    when = report.gap_in_time
+    blocks = [b for b in when["blocks"] if b["gap"] is not None]
+    assert blocks and when["named"] == ["stretch_reflex"]
+    for b in blocks:
+        assert b["gap_named"] is not None and b["gap_named"] < 0.5 * b["gap"], b
+    assert when["gap_named_all"] == pytest.approx(report.gap["features"]["named_all"])
+    text = (report.out_dir / "report.md").read_text()
+    assert "gap with stretch_reflex |" in text
+    assert (report.out_dir / "gap_time.png").stat().st_size > 1000
