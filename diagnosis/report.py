@@ -420,7 +420,8 @@ def write_set_index(result, out_dir) -> Path:
          "conditions": {c: {"report": f"{r.out_dir.name if r.out_dir else c}/report.json",
                             "verdict": r.verdict, "named_effects": r.named,
                             "indistinguishable": r.indistinguishable,
-                            "fitted_parameters": r.fitted, "gap": r.gap}
+                            "fitted_parameters": r.fitted,
+                            "named_model": r.named_model, "gap": r.gap}
                         for c, r in result.reports.items()}}), indent=2))
     _atomic_text(out / "report.md", "\n".join(lines))
     return out / "report.md"
