@@ -92,8 +92,12 @@ class EffectFit:
 
 
 def widening_note(effect, param, side, before, after, scale: float = 1.0) -> str:
-    """One widening as text (``scale``: the factor to the file's units)."""
+    """One widening as text (``scale``: the factor to the file's units); ``after`` equal
+    to ``before``: every model beyond the bound diverged and the range stayed."""
     fmt = lambda b: f"[{b[0] * scale:.4g}, {b[1] * scale:.4g}]"  # noqa: E731
+    if list(after) == list(before):
+        return (f"{effect}: {param} search tried beyond its {side} bound of {fmt(before)} "
+                f"(best fit there): every model beyond diverged, the range stays")
     return (f"{effect}: {param} search widened from {fmt(before)} to {fmt(after)} "
             f"(best fit at its {side} bound)")
 
@@ -216,13 +220,20 @@ def _scalar_search(effect, ev, full, around, search: Search | None = None) -> di
         wider = p.widened(bounds, side)
         if wider is None or (p.log and not wider[0] > 0):
             break
-        search.widenings.append([p.name, side, list(bounds), list(wider)])
         # the new stretch, from the grid point next to the old bound inwards
         step = (to_x(bounds[1]) - to_x(bounds[0])) / max(ev.cfg.grid_points - 1, 1)
         if side == "upper":
             _grid_and_refine(objective, to_x(bounds[1]) - step, to_x(wider[1]), ev.cfg)
         else:
             _grid_and_refine(objective, to_x(wider[0]), to_x(bounds[0]) + step, ev.cfg)
+        beyond = [v for x, v in cache.items()
+                  if (x > to_x(bounds[1]) if side == "upper" else x < to_x(bounds[0]))]
+        if not any(math.isfinite(v) for v in beyond):
+            # every model beyond the old bound diverged: the range stays (and the fit on
+            # its bound stays flagged)
+            search.widenings.append([p.name, side, list(bounds), list(bounds)])
+            break
+        search.widenings.append([p.name, side, list(bounds), list(wider)])
         bounds = wider
     if bounds != (p.bounds[0], p.bounds[1]):
         search.searched[p.name] = list(bounds)

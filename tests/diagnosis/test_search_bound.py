@@ -139,10 +139,16 @@ class _AnalyticEvaluator:
     gap_value = objective
 
 
-def _search(effect, param, truth):
+def _search(effect, param, truth, diverges_below=None):
     from diagnosis.fitting import Search, fit_effect
     search = Search()
-    params, *_ = fit_effect(effect, _AnalyticEvaluator(effect, param, truth), search=search)
+    ev = _AnalyticEvaluator(effect, param, truth)
+    if diverges_below is not None:
+        finite = ev.objective
+        ev.objective = ev.gap_value = lambda e: (
+            math.inf if float(e[effect][param][0] if isinstance(e[effect][param], list)
+                              else e[effect][param]) < diverges_below else finite(e))
+    params, *_ = fit_effect(effect, ev, search=search)
     fit = search.record(effect, _fit({effect: params}, 1.0, 1.0))
     return params[param], fit
 
@@ -225,3 +231,15 @@ def test_a_parameter_without_physical_limits_is_refused():
 def test_a_non_physical_value_is_flagged_as_such():
     assert at_search_bound("gravity", {"tilt_deg": 95.0}) == ["tilt_deg = 95 > 90 (unphysical)"]
     assert at_search_bound("friction", {"Fc": -0.1}) == ["Fc = -0.1 < 0 (unphysical)"]
+
+
+def test_a_widening_where_every_model_diverges_keeps_the_range_and_the_flag():
+    """The issue case's transmission_compliance: below k_t = 30 N m/rad every model
+    diverged; the fit stays on the 30 N m/rad bound, flagged, and the report says why."""
+    value, fit = _search("transmission_compliance", "k_t", 5.0, diverges_below=29.99)
+    assert value == pytest.approx(30.0)
+    assert fit.searched == {}
+    assert fit.at_search_bound == ["transmission_compliance: k_t = 30 at lower search bound"]
+    assert fit.widening_notes() == ["transmission_compliance: k_t search tried beyond its "
+                                    "lower bound of [30, 5000] (best fit there): every model "
+                                    "beyond diverged, the range stays"]
