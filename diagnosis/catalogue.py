@@ -255,7 +255,8 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
     Effect("quantization", "encoder and torque-sensor resolution",
            (_p("encoder_resolution_deg", "deg", (1.758e-3, 7.031e-3), (1e-5, 0.1),
                physical=POS),
-            _p("torque_resolution_nm", "N m", (0.005, 0.02), (1e-5, 0.5), physical=POS)), fit="grid"),
+            _p("torque_resolution_nm", "N m", (0.005, 0.02), (1e-5, 0.5), physical=POS)),
+           fit="grid"),
     Effect("sensor_noise", "white Gaussian noise on every encoder and torque sample",
            (_p("theta_noise_std_rad", "rad", (5e-6, 5e-5), (1e-7, 1e-3), physical=POS),
             _p("tau_noise_std_nm", "N m", (0.003, 0.03), (1e-5, 0.3), scored=False,
@@ -272,7 +273,8 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
            robust_above={"time_constant_s": 1e-3}),
     Effect("transmission_compliance",
            "spring-damper between motor and link; encoder on the motor side",
-           (_p("k_t", "N m/rad", (150.0, 1000.0), (30.0, 5000.0), physical=POS),), always_robust=True),
+           (_p("k_t", "N m/rad", (150.0, 1000.0), (30.0, 5000.0), physical=POS),),
+           always_robust=True),
     Effect("interface_compliance", "compliant cuff between robot link and arm",
            (_p("k_s", "N m/rad", (100.0, 600.0), (20.0, 3000.0), physical=POS),)),
     Effect("gravity", "robot plane tilted from horizontal; gravity on the robot links",
@@ -292,7 +294,8 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
            "rectified (parallel-cascade model, Kearney, Stein & Parameswaran 1997)",
            # realistic: up to the ~30-40 N m s/rad, ~1.7 Hz of active ankle recordings
            (_p("gain", "N m s/rad", (1.0, 40.0), (0.02, 300.0), physical=POS),
-            _p("delay_s", "s", (0.03, 0.06), (0.005, 0.15), log=False, physical=POS),  # 5 ms: no reflex
+            # 5 ms: no reflex
+            _p("delay_s", "s", (0.03, 0.06), (0.005, 0.15), log=False, physical=POS),
             _p("frequency_hz", "Hz", (1.0, 6.0), (0.5, 30.0), physical=POS)),
            fit="limbfit", kinds=("position",),
            # stretch_sign: which velocity stretches the reflexing muscle (acts only when
