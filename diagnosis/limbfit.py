@@ -528,6 +528,8 @@ class EffectFit:
     calibration_gap, held_out_gap : relative gaps above noise;
     held_out_reduction : 1 - held-out gap / nominal held-out gap (None when no nominal gap);
     at_search_bound : catalogue.at_search_bound messages.
+    limb_ci : 95 % jackknife half-widths of the limb's K, B, I with the effect, as
+        ArmModel.ci ({"K_h", "B_h", "M_h"}: (n, n) lists); None without jackknife.
     """
 
     effect: str
@@ -540,6 +542,7 @@ class EffectFit:
     held_out_reduction: float | None
     at_search_bound: list = field(default_factory=list)
     n_evaluations: int = 0
+    limb_ci: dict | None = None
 
     def as_dict(self) -> dict:
         return {"effects": [self.effect], "effect": self.effect, "params": self.params,
@@ -657,13 +660,15 @@ def fit_effect(preps, name: str, nominal: dict, cfg: FitConfig = FitConfig(), *,
     if intervals and cfg.n_jackknife >= 2:
         ci, k = _jackknife(prob, x, lin, cfg)
         n_eval += k
+    limb_ci = getattr(prob, "limb_ci", None) if ci is not None else None
     out_params = {p.name: full[p.name] for p in effect.parameters}
     out_params.update({k: params[k] for k in effect.choices})
     bound = cat.at_search_bound(name, out_params)
     if any(v < 0 for k, v in lin.items()):
-        bound = bound + [f"{k} = {v:.4g} < 0 (unphysical)" for k, v in lin.items() if v < 0]
+        bound = bound + [f for f in (f"{k} = {v:.4g} < 0 (unphysical)"
+                                     for k, v in lin.items() if v < 0) if f not in bound]
     fit = EffectFit(name, out_params, ci, limb, obj, g_cal.value, g_held.value,
-                    reduction, bound, n_eval)
+                    reduction, bound, n_eval, limb_ci=limb_ci)
     fit._problem = (prob, x, lin)
     return fit
 
@@ -716,6 +721,7 @@ def add_intervals(fit: EffectFit, cfg: FitConfig = FitConfig()) -> EffectFit:
     from contextlib import nullcontext
     with getattr(prob, "split_context", nullcontext)():  # a varying effect's own split
         fit.intervals, k = _jackknife(prob, x, lin, cfg)
+    fit.limb_ci = getattr(prob, "limb_ci", None)
     fit.n_evaluations += k
     return fit
 
@@ -729,7 +735,7 @@ def _jackknife(prob: _Problem, x, lin, cfg):
     """Delete-one-block jackknife 95 % intervals of every primary parameter."""
     m = cfg.n_jackknife
     names = [p.name for p in prob.nl] + list(lin)
-    reps = []
+    reps, limb_reps = [], []
     n_eval0 = prob.n_eval
     for b in range(m):
         masks = []
@@ -746,12 +752,25 @@ def _jackknife(prob: _Problem, x, lin, cfg):
         vals = [params[p.name] for p in prob.nl]
         vals += [float(sol.coef[3 * prob.preps[0].n ** 2 + i]) for i in range(len(lin))]
         reps.append(vals)
+        limb_reps.append(np.asarray(sol.coef[:3 * prob.preps[0].n ** 2], float))
     prob.masks = None
     reps = np.array(reps)
     full = np.array([prob.params(x)[p.name] for p in prob.nl] + list(lin.values()))
     se = np.sqrt((m - 1) / m * np.sum((reps - reps.mean(axis=0)) ** 2, axis=0))
+    prob.limb_ci = _limb_half_widths(np.array(limb_reps), prob.preps[0].n)
     return ({nm: [float(v - 1.96 * s), float(v + 1.96 * s)]
              for nm, v, s in zip(names, full, se)}, prob.n_eval - n_eval0)
+
+
+def _limb_half_widths(reps, n: int) -> dict:
+    """95 % half-widths (1.96 jackknife standard errors) of the limb's K, B, I from the
+    delete-one-block replicates ``reps`` (m, 3 n^2), as ArmModel.ci: {"K_h", "B_h",
+    "M_h"} each (n, n) [N m/rad], [N m s/rad], [kg m^2]."""
+    m = reps.shape[0]
+    se = np.sqrt((m - 1) / m * np.sum((reps - reps.mean(axis=0)) ** 2, axis=0))
+    nn = n * n
+    return {key: (1.96 * se[i * nn:(i + 1) * nn]).reshape(n, n).tolist()
+            for i, key in enumerate(("K_h", "B_h", "M_h"))}
 
 
 def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosis:

@@ -46,11 +46,15 @@ class DiagnosisReport:
     indistinguishable: list = field(default_factory=list)
     #: how the trials were grouped, in one line (estimation.grouping.describe)
     grouping: str = ""
+    #: the named model in full: K, B, I and the effect's parameters, each [value, low,
+    #: high] (pipeline.report.named_model); None when nothing is named
+    named_model: dict | None = None
 
     def to_dict(self) -> dict:
         return {"format": "arm-impedance-diagnosis/1", "verdict": self.verdict,
                 "summary": self.summary, "named_effects": self.named,
                 "indistinguishable": self.indistinguishable,
+                "named_model": self.named_model,
                 "fitted_parameters": self.fitted, "fitted_intervals_95": self.intervals,
                 "amplitude_dependence": self.amplitude,
                 "conventions": self.conventions, "numerical_retries": self.numerics,
@@ -139,6 +143,8 @@ def markdown(report) -> str:
                 f"{e}: " + ", ".join(f"{k} [{_fmt(v[0], 4)}, {_fmt(v[1], 4)}]"
                                      for k, v in d.items())
                 for e, d in report.intervals.items() if d), ""]
+        if report.named_model:
+            lines += named_model_lines(report.named_model)
         lines += [
                   f"Held-out gap ({m}) {_fmt(g['nominal_held_out'])} -> "
                   f"{_fmt(g['named_held_out'])} (reduction "
@@ -196,6 +202,11 @@ def markdown(report) -> str:
                   "rows: the default split below):", ""]
         lines += [f"- {' + '.join(r['effects'])}: {r['split']['rule']} ({r['split']['why']})"
                   for r in splits]
+    widened = [w for r in report.ranking + report.pairs for w in r.get("widened", [])]
+    if widened:
+        lines += ["", "Search ranges widened (a best fit on a bound of its range, inside "
+                  "the parameter's physical limits):", ""] + \
+            [f"- {w}" for w in dict.fromkeys(widened)]
     lines += [f"- {' + '.join(r['effects'])} ranked above {'; '.join(r['preferred_over'])}: "
               f"the simpler (nested) effect is preferred" for r in report.ranking
               if r.get("preferred_over")]
@@ -233,6 +244,31 @@ def markdown(report) -> str:
         from .pipeline.when import markdown as when_lines
         lines += when_lines(report.gap_in_time)
     return "\n".join(lines)
+
+
+LIMB_UNITS = {"K": "N m/rad", "B": "N m s/rad", "I": "kg m^2"}
+
+
+def _triple(t) -> str:
+    """``"60.1 [59.8, 60.4]"`` (or the value alone without an interval)."""
+    v, lo, hi = t
+    return _fmt(v, 4) + ("" if lo is None else f" [{_fmt(lo, 4)}, {_fmt(hi, 4)}]")
+
+
+def named_model_lines(nm: dict) -> list:
+    """The named model in full (report.md): K, B, I and the effect, with intervals."""
+    def limb(key):
+        t = nm[key]
+        joints = [t] if t and not isinstance(t[0], list) else t
+        text = ", ".join(_triple(j) for j in joints)
+        return f"{key} = {text if len(joints) == 1 else '(' + text + ')'} {LIMB_UNITS[key]}"
+    which = ("the limb re-fitted with the effect" if nm["limb_refitted"] else
+             "the limb as estimated from the trials (the fit keeps it, not re-fitted)")
+    effects = "; ".join(f"{e}: " + ", ".join(
+        f"{k} = {_triple(v) if isinstance(v, list) else v}" for k, v in ps.items())
+        for e, ps in nm["effects"].items())
+    return [f"Named model ({which}; 95 % intervals in brackets where known): "
+            + ", ".join(limb(k) for k in ("K", "B", "I")) + f"; {effects}.", ""]
 
 
 def _plot_where(report, path: Path) -> None:
@@ -391,7 +427,8 @@ def write_set_index(result, out_dir) -> Path:
          "conditions": {c: {"report": f"{r.out_dir.name if r.out_dir else c}/report.json",
                             "verdict": r.verdict, "named_effects": r.named,
                             "indistinguishable": r.indistinguishable,
-                            "fitted_parameters": r.fitted, "gap": r.gap}
+                            "fitted_parameters": r.fitted,
+                            "named_model": r.named_model, "gap": r.gap}
                         for c, r in result.reports.items()}}), indent=2))
     _atomic_text(out / "report.md", "\n".join(lines))
     return out / "report.md"

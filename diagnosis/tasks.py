@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from .config import DiagnosisConfig
 from .evaluation import Evaluator, Unit, effects_key
-from .fitting import EffectFit, fit_effect, fit_second, jsonable, refine_pair
+from .fitting import EffectFit, Search, fit_effect, fit_second, jsonable, refine_pair
 from .parallel import worker_cache
 
 
@@ -70,8 +70,10 @@ def task_fit_single(state: TaskState, name: str, norms_cal: dict, norms_held: di
     """Fit one effect alone on the calibration units; its held-out gap."""
     ev_cal, ev_held = _worker_evaluators(state, norms_cal, norms_held)
     n_held = ev_held.n_simulations
-    params, gcal, nev, obj = fit_effect(name, ev_cal)
-    fit = EffectFit((name,), {name: jsonable(params)}, gcal, nev, objective=obj)
+    search = Search()
+    params, gcal, nev, obj = fit_effect(name, ev_cal, search=search)
+    fit = search.record(name, EffectFit((name,), {name: jsonable(params)}, gcal, nev,
+                                        objective=obj))
     return _with_held_out(fit, ev_held, n_held, ev_cal.n_dof)
 
 

@@ -156,18 +156,24 @@ class PositionServo(Experiment):
 
             def jackknife():
                 lf.add_intervals(best, cfg)
-                return {"intervals": best.intervals, "n": best.n_evaluations}
+                return {"intervals": best.intervals, "n": best.n_evaluations,
+                        "limb_ci": best.limb_ci}
             ci = _resumable(store, ("limbfit-jackknife", best.effect, repr(cfg)), jackknife,
                             lambda d: d,
-                            lambda d: {"intervals": dict(d["intervals"]), "n": int(d["n"])})
+                            lambda d: {"intervals": dict(d["intervals"]), "n": int(d["n"]),
+                                       "limb_ci": d.get("limb_ci")})
             best.intervals, best.n_evaluations = ci["intervals"], int(ci["n"])
+            best.limb_ci = ci["limb_ci"]
         out = []
         for f in fits:
             fit = EffectFit((f.effect,), {f.effect: dict(f.params)}, f.calibration_gap,
                             f.n_evaluations, held_out_gap=f.held_out_gap,
                             objective=f.calibration_objective)
             fit.intervals = None if f.intervals is None else {f.effect: f.intervals}
-            fit.model = model_of(f.limb, trials[0].fs, "limbfit with " + f.effect)
+            # the limb re-estimated with the effect, with its K, B, I intervals (the
+            # jackknife of the best fit)
+            fit.model = model_of(f.limb, trials[0].fs, "limbfit with " + f.effect,
+                                 ci=f.limb_ci)
             # a varying effect's own held-out split, and the nesting rule (report)
             fit.split = getattr(f, "split", None)
             fit.preferred_over = getattr(f, "preferred_over", None)
@@ -281,10 +287,13 @@ def limb_of(model):
                         I=np.atleast_2d(np.asarray(model.M, float)))
 
 
-def model_of(limb, fs, method):
-    """An ArmModel holding a limbfit LimbModel (for the simulator and the report)."""
+def model_of(limb, fs, method, ci=None):
+    """An ArmModel holding a limbfit LimbModel (for the simulator and the report);
+    ``ci``: its 95 % half-widths ({"K_h", "B_h", "M_h"}, limbfit.EffectFit.limb_ci)."""
     from ..arm import ArmModel
     n = limb.K.shape[0]
     return ArmModel(M=np.asarray(limb.I, float), B=np.asarray(limb.B, float),
                     K=np.asarray(limb.K, float), r2=np.full((n, n), np.nan), method=method,
-                    fs=fs, inertia_delay_s=0.0)
+                    fs=fs, inertia_delay_s=0.0,
+                    ci=None if ci is None else {k: np.asarray(v, float)
+                                                for k, v in ci.items()})

@@ -28,6 +28,9 @@ def ranking_row(fit, g0_cal: float, g0_held: float) -> dict:
             "at_search_bound": fit.at_search_bound,
             # the flags' parts, to format them again with the values in the file's units
             "flag_notes": fit.flag_notes(),
+            # a search range widened because the best fit lay on its bound (fitting.py)
+            **({"widened": fit.widening_notes(), "widenings": fit.widenings,
+                "searched": fit.searched} if getattr(fit, "widenings", None) else {}),
             **({"intervals": fit.intervals} if getattr(fit, "intervals", None) else {}),
             # the held-out split of a varying effect (diagnosis.varying_effects) and why
             **({"split": fit.split} if getattr(fit, "split", None) else {}),

@@ -41,7 +41,9 @@ def build(r) -> DiagnosisReport:
         intervals = _effects_in_units(intervals, rho)
         ranking = [_row_in_units(row, rho) for row in ranking]
         pair_rows = [_row_in_units(row, rho) for row in pair_rows]
+    named = None if chosen is None else named_model(model, fitted, intervals)
     return DiagnosisReport(
+        named_model=named,
         verdict=r.verdict, named=r.named, summary=r.summary, amplitude=r.amplitude,
         indistinguishable=list(getattr(r, "indistinguishable", [])),
         conventions=[f.to_dict() for f in r.findings], numerics=r.numerics,
@@ -118,6 +120,45 @@ def gap_block(r, chosen, reduction) -> dict:
     return top
 
 
+def _triples(values, half=None):
+    """[value, low, high] per joint (the diagonal of an (n, n) matrix) from ``half``
+    (95 % half-widths, same shape, or None: no interval); one triple for one joint."""
+    v = np.atleast_2d(np.asarray(values, float))
+    h = None if half is None else np.atleast_2d(np.asarray(half, float))
+    rows = [[float(v[i, i])] + ([None, None] if h is None else
+                                [float(v[i, i] - h[i, i]), float(v[i, i] + h[i, i])])
+            for i in range(v.shape[0])]
+    return rows[0] if len(rows) == 1 else rows
+
+
+def named_model(model: dict, fitted: dict, intervals: dict) -> dict:
+    """The named model in full (issue 21, item 6): the limb's K, B, I as the named model
+    simulates it, each ``[value, low, high]`` (95 %; per joint for several joints; low
+    and high None where no interval is known), and every named effect's parameters
+    likewise, ``{effect: {param: [value, low, high]}}``; a discrete choice (a reflex
+    rectified or not) as its value. ``limb_refitted``: True when the fit re-estimated
+    the limb with the effect (the position servo's limbfit), False when the named model
+    keeps the limb estimated from the trials (the exoskeleton's fits).
+
+    ``model``, ``fitted``, ``intervals``: the report's arm dict and the named fit's
+    parameters and intervals, in the file's units."""
+    limb = model.get("with_named_effect")
+    refitted = isinstance(limb, dict)
+    limb = limb if refitted else model
+    ci = limb.get("ci95") or {}
+    out = {"limb_refitted": refitted, "method": limb.get("method"),
+           "K": _triples(limb["K_h"], ci.get("K_h")), "B": _triples(limb["B_h"], ci.get("B_h")),
+           "I": _triples(limb["M_h"], ci.get("M_h")), "effects": {}}
+    for effect, params in (fitted or {}).items():
+        cis = (intervals or {}).get(effect) or {}
+        choices = cat.get_effect(effect).choices if effect in cat.CATALOGUE else {}
+        out["effects"][effect] = {
+            k: v if isinstance(v, (bool, str)) or k in choices else
+            [float(v)] + ([float(c) for c in cis[k]] if k in cis else [None, None])
+            for k, v in params.items()}
+    return out
+
+
 #: units of the values that scale with tau_h / theta when the trials were rescaled
 IMPEDANCE_UNITS = ("N m/rad", "N m s/rad", "kg m^2", "N m s^2/rad")
 
@@ -156,12 +197,25 @@ def _row_in_units(row: dict, rho: float) -> dict:
     if row.get("flag_notes") is not None:  # the flags with the values shown beside them
         from ..fitting import format_flags
         row["at_search_bound"] = format_flags(row["flag_notes"], row["params"])
+    if row.get("widenings"):  # the ranges searched, in the file's units too
+        from ..fitting import widening_note
+        row["widened"] = [widening_note(*w, scale=_param_scale(w[0], w[1], rho))
+                          for w in row["widenings"]]
+        row["searched"] = _effects_in_units(row.get("searched") or {}, rho)
     return row
+
+
+def _param_scale(effect: str, param: str, rho: float) -> float:
+    """rho for an impedance-like parameter (IMPEDANCE_UNITS), else 1."""
+    units = {p.name: p.unit for p in cat.get_effect(effect).parameters}
+    return rho if units.get(param) in IMPEDANCE_UNITS else 1.0
 
 
 def run(r) -> None:
     """Fill ``r.report``; write it when ``r.out_dir`` is set (atomically, see
     :func:`write_atomically`)."""
+    from .when import add_named
+    add_named(r)  # the named model's gap per time block, beside the nominal's
     r.report = build(r)
     if r.out_dir is not None:
         r.report.out_dir = Path(r.out_dir)

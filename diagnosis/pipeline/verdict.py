@@ -134,8 +134,9 @@ def verdict_text(verdict, named, chosen, g0_held, residual, amplitude, best=None
 
 
 def _not_named(best, g0_held, params=None) -> str:
-    """Why the best-ranked fit is not the explanation: a parameter on a search bound (or
-    a non-physical value), or too small a share of the held-out gap. ``params``: the
+    """Why the best-ranked fit is not the explanation: a parameter on a bound of its
+    search (widened as far as catalogue.MAX_WIDENINGS and the physical limits let it), on
+    a physical limit or beyond one, or too small a share of the held-out gap. ``params``: the
     fit's parameters as the report shows them (the file's units), default its own."""
     if best is None or not best.effects:
         return "no catalogue effect could be fitted"
@@ -145,8 +146,10 @@ def _not_named(best, g0_held, params=None) -> str:
     from ..fitting import format_flags
     flags = format_flags(best.flag_notes(), params or best.params)
     if flags:
-        return (f"the best fit, {what}, has {'; '.join(flags)}: a fit at a search bound "
-                f"(or with a non-physical value) absorbs model error, so it is not named")
+        widened = " (its search widened as far as it goes)" if best.widenings else ""
+        return (f"the best fit, {what}, has {'; '.join(flags)}{widened}: a fit at a search "
+                f"bound (the widest searched), on a physical limit or with a non-physical "
+                f"value absorbs model error, so it is not named")
     return f"no catalogue effect closes half of the held-out gap (the best: {what})"
 
 

@@ -14,6 +14,10 @@ stage runs the project's one time-variation test (estimation.timevarying, the te
   nominal feature gap (None when the block is shorter than the 3 spectral segments the
   features need); the block with the largest gap is named in the summary and drawn in
   ``gap_time.png``.
+- **The named model in time.** With an effect named, :func:`add_named` (run by the report
+  stage, once the verdict has named it) gives each block's feature gap of the named
+  model beside the nominal's (``gap_named``) and ``gap_named_all`` over the record: where
+  in time the named effect closes the gap, and where it leaves it.
 """
 
 from __future__ import annotations
@@ -74,9 +78,29 @@ def _angle_imposed(r) -> bool:
     return isinstance(r.experiment, PositionServo)
 
 
-def _block_gap(r, simulate, trial, t_s, cfg):
-    """The nominal feature gap over the samples of ``t_s`` [s] of ``trial`` (the nominal
-    run shared through ``r.cache``); None when too short for the features."""
+def add_named(r) -> None:
+    """Each block's feature gap of the named model (``gap_named``, beside the nominal's
+    ``gap``) and over the record (``gap_named_all``), in ``r.when``; the named model's
+    full runs are shared through the verdict's evaluator (``r.ev_named``), so no trial is
+    simulated again. Nothing when no effect is named or the when stage did not run."""
+    when = getattr(r, "when", None)
+    chosen, ev = getattr(r, "chosen", None), getattr(r, "ev_named", None)
+    if not when or chosen is None or ev is None:
+        return
+    effects = chosen.simulation_effects(r.n_dof)
+    by_name = {t.name: t for t in r.trials}
+    for b in when["blocks"]:
+        trial = by_name.get(b["trial"])
+        b["gap_named"] = None if trial is None or b.get("gap") is None else _block_gap(
+            r, ev.simulate, trial, b["t_s"], r.config, effects=effects, cache=ev._sims)
+    when["gap_named_all"] = None if r.after is None else float(r.after.value)
+    when["named"] = list(chosen.effects)
+
+
+def _block_gap(r, simulate, trial, t_s, cfg, effects=None, cache=None):
+    """The feature gap of the model ``simulate`` runs (with ``effects``, default none:
+    the nominal) over the samples of ``t_s`` [s] of ``trial`` (runs shared through
+    ``cache``, default ``r.cache``); None when too short for the features."""
     fs = trial.fs
     start = max(0, int(round(t_s[0] * fs)))
     stop = min(trial.n_samples, int(round(t_s[1] * fs)))
@@ -84,8 +108,8 @@ def _block_gap(r, simulate, trial, t_s, cfg):
         return None
     try:
         ev = Evaluator(r.experiment, simulate, [Unit(trial, start, stop, "block")], cfg,
-                       r.cache)
-        return float(ev.gap_value({}))
+                       r.cache if cache is None else cache)
+        return float(ev.gap_value(effects or {}))
     except Exception:  # noqa: BLE001 - a block the features cannot use has no gap
         return None
 
@@ -125,9 +149,17 @@ def plot(when: dict, path) -> None:
         bs = [b for b in when["blocks"] if b["trial"] == e["trial"] and b["gap"] is not None]
         for b in bs:
             ax2.plot(b["t_s"], [b["gap"], b["gap"]], "-", color="C3", lw=2)
-    ax2.axhline(when["gap_all"], color="k", ls="--", lw=1, label="whole record")
+            if b.get("gap_named") is not None:
+                ax2.plot(b["t_s"], [b["gap_named"], b["gap_named"]], "-", color="C2", lw=2)
+    named = " + ".join(when.get("named") or [])
+    ax2.plot([], [], "-", color="C3", lw=2, label="nominal, per block")
+    ax2.axhline(when["gap_all"], color="k", ls="--", lw=1, label="nominal, whole record")
+    if when.get("gap_named_all") is not None:
+        ax2.plot([], [], "-", color="C2", lw=2, label=f"with {named}, per block")
+        ax2.axhline(when["gap_named_all"], color="C2", ls="--", lw=1,
+                    label=f"with {named}, whole record")
     ax2.set_xlabel("time [s]")
-    ax2.set_ylabel("nominal gap (features)")
+    ax2.set_ylabel("gap (features)")
     ax2.legend(loc="best", fontsize=8)
     ax1.set_title("The gap in time (blocks of the shared time-variation test)")
     fig.tight_layout()
@@ -146,15 +178,20 @@ def markdown(when: dict) -> list:
     for e in when["trials"]:
         if e["time_varying"]:
             lines += [f"- {e['message']}"]
+    named = " + ".join(when.get("named") or [])
+    fmt = lambda g: "-" if g is None else "%.3g" % g  # noqa: E731
     if when["blocks"]:
+        extra = f" gap with {named} |" if named else ""
         lines += ["", "| trial | block [s] | K [N m/rad] | B [N m s/rad] | I [kg m^2] | "
-                  "nominal gap |", "|---|---|---|---|---|---|"]
+                  "nominal gap |" + extra, "|---|---|---|---|---|---|" + ("---|" if named else "")]
         for b in when["blocks"]:
             lines.append(f"| {b['trial']} | {b['t_s'][0]:.1f}-{b['t_s'][1]:.1f} | "
                          + " | ".join(f"{b[p][0]:.4g} [{b[p][1]:.4g}, {b[p][2]:.4g}]"
                                       for p in ("K", "B", "I"))
-                         + f" | {'-' if b['gap'] is None else '%.3g' % b['gap']} |")
-        lines += ["", f"Gap over the whole record: {when['gap_all']:.3g}. Plot: "
-                  "gap_time.png.", ""]
+                         + f" | {fmt(b['gap'])} |"
+                         + (f" {fmt(b.get('gap_named'))} |" if named else ""))
+        lines += ["", f"Gap over the whole record: {when['gap_all']:.3g}"
+                  + (f" (with {named}: {fmt(when.get('gap_named_all'))})" if named else "")
+                  + ". Plot: gap_time.png.", ""]
     lines += [f"Note: {n}" for n in when.get("notes", [])]
     return lines
