@@ -35,10 +35,12 @@ run's own; CPU s per run (process time of the tracker alone, the simulation apar
 Coverage (``--coverage``: the segment-wise fit alone, the other trackers not run): over
 every segment of every run whose fitted span (the segment less ``GUARD_S`` at an inner
 end) holds no true switch, the fraction whose 95 % half-width covers the truth (K: the
-true K's mean over that span; B, I constant), for the reported half-width (``ci``, the
-larger of the two) and for each of its two sources: ``ci_window`` (the window test's
+true K's mean over that span; B, I constant), for the reported half-width (``ci``: the
+batch means where a segment has 3 sub-blocks, else the window noise) and for each of its
+two sources: ``ci_window`` (the window test's
 noise sigma scaled by sqrt(window / span)) and ``ci_batch`` (batch means of 0.25 s
-sub-block fits). Writes bench/results/square_wave_coverage.json.
+sub-block fits). Writes bench/results/square_wave_coverage_SNRdB.json (40 runs took
+about 8 min wall on the shared machine).
 
 Run from the repository root: ``nice python3 bench/bench_square_wave.py [--runs 100]``
 (2 worker processes; 100 runs took 18 min wall on the shared 2-core machine, mostly
@@ -402,7 +404,7 @@ def main(argv=None):
         cov = coverage_summary(rows)
         print(coverage_table(cov, args.runs, args.snr_db))
         nch = [r["n_changes"] for r in rows]
-        write_results("square_wave_coverage", {
+        write_results(f"square_wave_coverage_{args.snr_db:g}dB", {
             "bench": "square_wave_coverage", "runs": args.runs, "seed": args.seed,
             "snr_db": args.snr_db, "wall_s": time.time() - t0, "coverage": cov,
             "n_changes_found": {str(o): nch.count(o) for o in sorted(set(nch))},
