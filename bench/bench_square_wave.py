@@ -40,7 +40,7 @@ batch means where a segment has 3 sub-blocks, else the window noise) and for eac
 two sources: ``ci_window`` (the window test's
 noise sigma scaled by sqrt(window / span)) and ``ci_batch`` (batch means of 0.25 s
 sub-block fits). Writes bench/results/square_wave_coverage_SNRdB.json (40 runs took
-about 8 min wall on the shared machine).
+6 min wall on the shared machine, 20 at 5 dB 2 min).
 
 Run from the repository root: ``nice python3 bench/bench_square_wave.py [--runs 100]``
 (2 worker processes; 100 runs took 18 min wall on the shared 2-core machine, mostly

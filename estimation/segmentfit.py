@@ -97,6 +97,10 @@ class SegmentTrack:
                 "initial_change_s": [float(x) for x in self.initial_change_s],
                 "values": {p: [float(v) for v in self.values[p]] for p in PARAMS},
                 "ci95": {p: [float(v) for v in self.ci[p]] for p in PARAMS},
+                "ci95_window": {p: [float(v) for v in self.ci_window.get(p, [])]
+                                for p in PARAMS},
+                "ci95_batch": {p: [float(v) for v in self.ci_batch.get(p, [])]
+                               for p in PARAMS},
                 "window_s": self.window_s, "warnings": list(self.warnings)}
 
 
