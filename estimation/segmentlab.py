@@ -14,6 +14,9 @@ When it runs (``AnalysisOptions.track``, ``--track``):
   gives one segment); a trial with several joints, or too short, gets a warning naming why;
 - ``none``: never.
 
+Each track's ``trigger`` says why it ran: the test's finding (``time-variation test:
+switching change``) when there is one, else ``requested (--track segments)``.
+
 results.json (and ``--json``) get ``time_segments``: ``{"trial", "trigger",
 "change_times_s", "segments": [{"start_s", "stop_s", "K": [v, lo, hi], "B": [...],
 "I": [...]}], "confidence", "window_s", "warnings"}`` (a second trial's under
