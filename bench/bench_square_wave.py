@@ -32,6 +32,16 @@ each switch (searched within a quarter period either side), of the mean-over-run
 (which includes the runs' timing jitter) and the median over runs and switches of each
 run's own; CPU s per run (process time of the tracker alone, the simulation apart).
 
+Coverage (``--coverage``: the segment-wise fit alone, the other trackers not run): over
+every segment of every run whose fitted span (the segment less ``GUARD_S`` at an inner
+end) holds no true switch, the fraction whose 95 % half-width covers the truth (K: the
+true K's mean over that span; B, I constant), for the reported half-width (``ci``: the
+batch means where a segment has 3 sub-blocks, else the window noise) and for each of its
+two sources: ``ci_window`` (the window test's
+noise sigma scaled by sqrt(window / span)) and ``ci_batch`` (batch means of 0.25 s
+sub-block fits). Writes bench/results/square_wave_coverage_SNRdB.json (40 runs took
+6 min wall on the shared machine, 20 at 5 dB 2 min).
+
 Run from the repository root: ``nice python3 bench/bench_square_wave.py [--runs 100]``
 (2 worker processes; 100 runs took 18 min wall on the shared 2-core machine, mostly
 the simulation; ``--runs 4`` for a quick check). Prints a markdown
@@ -157,6 +167,78 @@ def one_run(args):
             "tracks": {m: v[0].astype(np.float32) for m, v in tracks.items()},
             "cpu_s": {m: v[1] for m, v in tracks.items()},
             "extra": {m: v[2] for m, v in tracks.items()}}
+
+
+def coverage_run(args):
+    """One run of ``--coverage``: per segment of the segment-wise fit, its values,
+    half-widths (ci, ci_window, ci_batch) and the truth over its fitted span."""
+    run, seed, snr_db = args
+    import labsim
+    from estimation.segmentfit import GUARD_S, segment_track
+    rec = labsim.simulate(spec_for(run, seed))
+    tau = rec.trial.tau_h[:, 0]
+    rng = np.random.default_rng([seed, run, 1])
+    tau_n = tau + float(np.std(tau)) * 10 ** (-snr_db / 20) * rng.standard_normal(tau.size)
+    c = time.process_time()
+    sg = segment_track(rec.trial.theta[:, 0], tau_n, rec.trial.fs)
+    cpu = time.process_time() - c
+    a = rec.truth["arrays"]
+    t = np.asarray(a["t"], float).ravel()
+    truth = {p: np.asarray(a[p], float).ravel() if p in a else None for p in ("K", "B", "I")}
+    const = {"B": 1.2, "I": 0.015}
+    switches = t[1:][np.diff(truth["K"]) != 0]
+    e = sg.edges_s
+    segs = []
+    for j in range(len(e) - 1):
+        lo = e[j] + (GUARD_S if j else 0.0)
+        hi = e[j + 1] - (GUARD_S if j + 2 < len(e) else 0.0)
+        m = (t >= lo) & (t < hi)
+        clean = not np.any((switches > lo) & (switches < hi))
+        row = {"start_s": float(e[j]), "stop_s": float(e[j + 1]), "clean": bool(clean)}
+        for p in ("K", "B", "I"):
+            tv = truth[p]
+            row[p] = {"value": float(sg.values[p][j]),
+                      "truth": float(np.mean(tv[m])) if tv is not None and m.any()
+                      else const.get(p, float("nan")),
+                      **{k: float(getattr(sg, k)[p][j]) for k in ("ci", "ci_window",
+                                                                  "ci_batch")}}
+        segs.append(row)
+    return {"run": run, "segments": segs, "n_changes": int(sg.change_s.size),
+            "cpu_s": cpu}
+
+
+def coverage_summary(rows) -> dict:
+    """Coverage [%] per parameter and half-width kind over the clean segments; median
+    half-widths; the RMS of the errors over the median half-width / 1.96."""
+    segs = [s for r in rows for s in r["segments"]]
+    clean = [s for s in segs if s["clean"]]
+    out = {"segments": len(segs), "clean_segments": len(clean), "params": {}}
+    for p in ("K", "B", "I"):
+        err = np.array([s[p]["value"] - s[p]["truth"] for s in clean])
+        d = {"rms_error": float(np.sqrt(np.mean(err ** 2))) if err.size else None}
+        for k in ("ci", "ci_window", "ci_batch"):
+            h = np.array([s[p][k] for s in clean])
+            ok = np.isfinite(h)
+            d[k] = {"coverage_pct": float(100 * np.mean(np.abs(err[ok]) <= h[ok]))
+                    if ok.any() else None,
+                    "median_half_width": float(np.median(h[ok])) if ok.any() else None,
+                    "n": int(ok.sum())}
+        out["params"][p] = d
+    return out
+
+
+def coverage_table(cov, runs, snr_db) -> str:
+    lines = [f"Coverage of the segment-wise fit's 95 % half-widths: {runs} runs, "
+             f"{cov['clean_segments']} segments without a true switch (of "
+             f"{cov['segments']}), SNR {snr_db:g} dB", "",
+             "| parameter | RMS error | coverage % ci (median hw) | ci_window | ci_batch |",
+             "|---|---|---|---|---|"]
+    for p, d in cov["params"].items():
+        cells = [f"{d[k]['coverage_pct']:.1f} ({d[k]['median_half_width']:.3g})"
+                 if d[k]["coverage_pct"] is not None else "-"
+                 for k in ("ci", "ci_window", "ci_batch")]
+        lines.append(f"| {p} | {d['rms_error']:.3g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 def grid():
@@ -304,6 +386,8 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=20)
     ap.add_argument("--snr-db", type=float, default=15.0)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--coverage", action="store_true",
+                    help="the segment-wise fit's 95 %% half-widths' coverage only")
     args = ap.parse_args(argv)
     try:
         from tqdm import tqdm
@@ -314,6 +398,18 @@ def main(argv=None):
                 yield x
     t0 = time.time()
     jobs = [(r, args.seed, args.snr_db) for r in range(args.runs)]
+    if args.coverage:
+        with ProcessPoolExecutor(max_workers=args.workers) as ex:
+            rows = list(tqdm(ex.map(coverage_run, jobs), total=len(jobs), desc="coverage"))
+        cov = coverage_summary(rows)
+        print(coverage_table(cov, args.runs, args.snr_db))
+        nch = [r["n_changes"] for r in rows]
+        write_results(f"square_wave_coverage_{args.snr_db:g}dB", {
+            "bench": "square_wave_coverage", "runs": args.runs, "seed": args.seed,
+            "snr_db": args.snr_db, "wall_s": time.time() - t0, "coverage": cov,
+            "n_changes_found": {str(o): nch.count(o) for o in sorted(set(nch))},
+            "cpu_s_per_run": float(np.mean([r["cpu_s"] for r in rows]))})
+        return
     with ProcessPoolExecutor(max_workers=args.workers) as ex:
         rows = list(tqdm(ex.map(one_run, jobs), total=len(jobs), desc="square wave"))
     res = summarise(rows)

@@ -90,6 +90,13 @@ def _analysis_arguments(p, truth_default="none") -> None:
                         "part of theta[j]); as metadata 'scheduling', which it overrides "
                         "(default: the declared one, an nldat 'sv', or the slow angle of a "
                         "joint that moves; docs/estimation.md)")
+    g.add_argument("--track", choices=("auto", "segments", "none"), default="auto",
+                   help="piecewise-constant K, B, I over time of one-joint trials "
+                        "(segments, change times refined on the samples; results.json "
+                        "time_segments, figures segments_LABEL.png/.csv): auto where the "
+                        "time-variation test finds a step or switching change, segments "
+                        "always (e.g. beside --scheduling time's smooth fit), none "
+                        "(docs/estimation.md)")
     g.add_argument("--pool", action="store_true",
                    help="average the spectra of unlabelled recordings of the same set-up "
                         "(by default each is estimated alone)")
@@ -187,7 +194,7 @@ def options_from(args):
         sampling_correction="off" if args.raw else args.sampling_correction,
         leakage_correction="off" if args.raw else args.leakage_correction, pool=args.pool,
         weighting=args.weighting, segments=args.segments,
-        reflex=_reflex_options(args))
+        reflex=_reflex_options(args), track=getattr(args, "track", "auto"))
     options.check()
     return options
 
@@ -467,6 +474,8 @@ def describe(r, torque_sign=None) -> str:
     lines += [x.describe() for x in (r.reflex or [])]
     from .pvlab import describe_varying
     lines += describe_varying(getattr(r, "varying", None) or [])
+    from .segmentlab import describe_segments
+    lines += describe_segments(getattr(r, "time_segments", None) or [])
     return "\n".join(lines)
 
 

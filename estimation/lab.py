@@ -65,6 +65,9 @@ class AnalysisOptions:
     coherence_min, r2_min, ci_max_rel : thresholds of the warnings
     reflex : also fit the intrinsic + reflex (parallel-cascade) model of each one-joint
         trial (estimation.reflex; a ReflexOptions, or True for its defaults)
+    track : piecewise-constant K, B, I of one-joint trials (estimation.segmentlab):
+        "auto" (where the time-variation test finds a step or switching change),
+        "segments" (always), "none"
     """
 
     method: str = "auto"
@@ -86,8 +89,13 @@ class AnalysisOptions:
     r2_min: float = 0.9
     ci_max_rel: float = 0.25
     reflex: object = False
+    track: str = "auto"
 
     def check(self) -> None:
+        from .segmentlab import TRACKS
+        if self.track not in TRACKS:
+            raise EstimationError(f"--track must be one of {', '.join(TRACKS)}, got "
+                                  f"{self.track!r}")
         if self.method != "auto" and self.method not in METHODS:
             raise EstimationError(f"method must be 'auto' or one of {METHODS}, got "
                                   f"{self.method!r}")
@@ -181,6 +189,8 @@ class LabResult:
     reflex_not_fitted: list = field(default_factory=list)
     #: estimation.varying.VaryingResult per trial with a scheduling variable (pvlab)
     varying: list = field(default_factory=list)
+    #: estimation.segmentfit.SegmentTrack per one-joint trial tracked (segmentlab)
+    time_segments: list = field(default_factory=list)
 
     def parameters(self) -> dict:
         """``{"M"|"B"|"K": {"value", "ci", "unit", "name"}}`` with (n, n) nested lists."""
@@ -211,6 +221,9 @@ class LabResult:
         if self.varying:
             from .pvlab import varying_json
             out["parameter_varying"] = varying_json(self.varying)
+        if self.time_segments:
+            from .segmentlab import segments_json
+            out["time_segments"] = segments_json(self.time_segments)
         return out
 
     @property
@@ -436,8 +449,11 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
     if options.segments != 0:  # the test diagnose shares (estimation.timevarying)
         from .timevarying import of_trials
         result.time_variation, tv = of_trials(usable)
+    from .segmentlab import segments_of_trials  # piecewise-constant K, B, I
+    result.time_segments, seg_notes = segments_of_trials(usable, options.track,
+                                                         result.time_variation)
     sens = sensitivity_warnings(result)
-    result.warnings += conv + tv + sens
+    result.warnings += conv + tv + seg_notes + sens
     result.flags = list(dict.fromkeys(
         w.split(":")[0].split(" Z")[0] for w in result.warnings
         if w.startswith(("non-physical", "poor fit", "torque sign", "time-varying",

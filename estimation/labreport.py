@@ -70,6 +70,8 @@ def write_lab_report(results, out, *, options=None, grouping=None) -> list[str]:
             names.append(_save(bode(r), tmp / f"bode_{stem}.png"))
             from .pvlab import write_varying_files  # K, B, I over the scheduling variable
             names += write_varying_files(r, tmp, stem)
+            from .segmentlab import write_segment_files  # piecewise-constant K, B, I
+            names += write_segment_files(r, tmp, stem)
         names += write_parameters(results, tmp, torque_sign=(options or {}).get("torque_sign"))
         if any(getattr(r, "reflex", None) for r in results):
             from .reflex import write_reflex_tables

@@ -70,3 +70,18 @@ def test_a_stationary_limb_gives_one_segment():
     r = segment_track(rec.trial.theta[:, 0], tau, rec.trial.fs)
     assert r.change_s.size == 0, r.change_s
     assert r.values["K"][0] == pytest.approx(80.0, rel=0.05)
+
+
+def test_batch_half_widths_match_the_least_squares_standard_error():
+    """Independent answer: white-noise regression, where the 95 % half-width of a least-
+    squares coefficient is 1.96 sigma sqrt(diag (X'X)^-1); the batch means of 40
+    sub-blocks estimate it (within the spread of an SD from 39 degrees of freedom)."""
+    from estimation.segmentfit import _batch_half_widths, _Sums
+    rng = np.random.default_rng(3)
+    n = 40_000
+    X = rng.standard_normal((n, 3)) * np.array([0.02, 1.0, 50.0])
+    y = X @ np.array([80.0, 1.2, 0.015]) + 0.5 * rng.standard_normal(n)
+    hw = _batch_half_widths(_Sums(X, y), 0, n, n // 40)
+    se = 0.5 * np.sqrt(np.diag(np.linalg.inv(X.T @ X)))
+    assert np.all(np.abs(hw / (1.96 * se) - 1) < 0.35), hw / (1.96 * se)
+    assert np.all(np.isnan(_batch_half_widths(_Sums(X, y), 0, 100, 50)))  # < 3 blocks
