@@ -48,8 +48,9 @@ ALPHA, WINDOW_S, BAND_HZ = 1e-3, 1.0, (3.0, 30.0)
 MIN_INTERVAL, MIN_CHANGE, MIN_BLOCK = 4, 0.10, 2
 #: left out at each end of the record [s]: the band-pass filter's edge transients
 EDGE_S = 2.0
-#: sub-block of the interleaved half-window fits that measure the noise [s]
-SUB_S = 0.1
+#: two windows whose band-passed angles correlate more than this are not used as each
+#: other's noise samples (a periodic perturbation's repeats)
+MAX_ALIKE = 0.3
 #: the seeded intervals' decay from one scale to the next (Kovacs et al. 2023: in [1/2, 1))
 DECAY = 0.5 ** 0.5
 #: windows whose band-passed angle power is below this fraction of the median are left
@@ -170,49 +171,63 @@ def track(theta, tau, fs, *, window_s=WINDOW_S, band_hz=BAND_HZ, sign=None) -> d
     Xs = X / scale
     XtX = np.einsum("wli,wlj->wij", Xs, Xs)
     XtY = np.einsum("wli,wl->wi", Xs, Y)
-    coef = np.linalg.solve(XtX, XtY[..., None])[..., 0] / scale
-    half = _interleaved_halves(Xs, Y, L, fs) / scale  # (2, W, 3): the noise check
+    coef_s = np.linalg.solve(XtX, XtY[..., None])[..., 0]
+    coef = coef_s / scale
     if sign is None:
         whole = np.linalg.lstsq(X.reshape(-1, 3), Y.ravel(), rcond=None)[0]
         sign = -1.0 if whole[0] < 0 else 1.0
     coef *= sign
-    half *= sign
     t = (edge + (np.arange(W) + 0.5) * L) / fs
     power = np.mean(X[:, :, 0] ** 2, axis=1)
     keep = power >= MIN_EXCITATION * np.median(power)
-    coef, t, half = coef[keep], t[keep], half[:, keep]
-    return {"t": t, "t0": edge / fs, "n_dropped": int(np.count_nonzero(~keep)),
-            "K": coef[:, 0], "B": coef[:, 1], "I": coef[:, 2],
-            "halves": half, "window_s": L / fs, "sign": float(sign)}
+    residual = Y - np.einsum("wli,wi->wl", Xs, coef_s)
+    errors = sign * _residual_swap_errors(Xs[keep], XtX[keep], residual[keep]) / scale
+    return {"t": t[keep], "t0": edge / fs, "n_dropped": int(np.count_nonzero(~keep)),
+            "K": coef[keep, 0], "B": coef[keep, 1], "I": coef[keep, 2],
+            "errors": errors, "window_s": L / fs, "sign": float(sign)}
 
 
-def _interleaved_halves(Xs, Y, L, fs, sub_s=SUB_S):
-    """Each window fitted twice, on its even and on its odd sub-blocks of ``sub_s``: both
-    halves see the same time-average of a changing impedance, so their difference is
-    sampling noise alone, even where the impedance changes fast (a modulation of a few
-    seconds, which would inflate a noise scale taken from neighbouring windows)."""
-    q = max(1, int(round(sub_s * fs)))
-    parity = (np.arange(L) // q) % 2
-    out = []
-    for k in (0, 1):
-        m = (parity == k).astype(float)
-        A = np.einsum("wli,wlj,l->wij", Xs, Xs, m)
-        b = np.einsum("wli,wl,l->wi", Xs, Y, m)
-        out.append(np.linalg.solve(A, b[..., None])[..., 0])
-    return np.stack(out)
+def _residual_swap_errors(Xs, XtX, E, max_alike=MAX_ALIKE):
+    """The errors the recording's own noise makes in each window's estimate.
+
+    Window w's least-squares error is ``(X_w' X_w)^-1 X_w' e_w``; its spread depends on the
+    noise's serial correlation, not only on its power (sensor noise that is coloured, the
+    slow voluntary torque leaking into the band: both correlated over tenths of a second).
+    The other windows' residuals are 1 s samples of that noise with their correlation
+    intact, so each is passed through window w's estimator (a residual block bootstrap
+    with the windows as blocks; Kuensch 1989, Politis & Romano 1994):
+    ``D[w, v] = (X_w' X_w)^-1 X_w' e_v``.
+
+    Parameters: ``Xs`` (W, L, 3) scaled regressors, ``XtX`` (W, 3, 3), ``E`` (W, L) the
+    windows' own residuals (torque units). Returns D (W, W, 3) in the scaled units, NaN
+    where v = w (a residual is orthogonal to its own window's regressors) or where the two
+    windows' angles are alike (|correlation| > ``max_alike``: a periodic perturbation's
+    repeats, whose residuals are orthogonal to this window's regressors too).
+    """
+    G = np.einsum("wli,vl->wvi", Xs, E)
+    D = np.linalg.solve(XtX[:, None], G[..., None])[..., 0]
+    a = Xs[:, :, 0] / (np.linalg.norm(Xs[:, :, 0], axis=1, keepdims=True) + 1e-300)
+    alike = (np.abs(a @ a.T) > max_alike) | np.eye(len(Xs), dtype=bool)
+    D[alike] = np.nan
+    return D
 
 
-def window_sigma(v, halves=None) -> float:
-    """Sampling noise of one window's estimate. With ``halves`` (2, W): from the
-    differences of the interleaved half-window fits (:func:`_interleaved_halves`; each
-    half has twice the window's variance, so sigma = scale(d) / 2); else from the track's
-    first differences (scale / sqrt 2). The scale is the MAD's (Rousseeuw & Croux 1993),
-    robust to the few windows astride a switch."""
-    if halves is not None:
-        d, k = np.asarray(halves[0] - halves[1], float), 2.0
-    else:
-        d, k = np.diff(np.asarray(v, float)), np.sqrt(2)
-    return float(1.4826 * np.median(np.abs(d - np.median(d))) / k)
+def window_sigma(v, errors=None) -> float:
+    """Sampling noise of one window's estimate [the parameter's unit].
+
+    With ``errors`` (W, W) (:func:`_residual_swap_errors` for one parameter): per window,
+    the MAD scale (Rousseeuw & Croux 1993) of the errors the other windows' residuals
+    make in it (robust to the few residuals of windows astride a switch, which hold the
+    change itself), pooled over the windows as a root mean square (the variance of a
+    block's mean of windows). Else from the track's first differences (scale / sqrt 2).
+    """
+    if errors is not None:
+        e = np.asarray(errors, float)
+        med = np.nanmedian(e, axis=1, keepdims=True)
+        per_window = 1.4826 * np.nanmedian(np.abs(e - med), axis=1)
+        return float(np.sqrt(np.nanmean(per_window ** 2)))
+    d = np.diff(np.asarray(v, float))
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2))
 
 
 # ----------------------------------------------------------------------------- change points
@@ -289,7 +304,7 @@ def time_variation(theta, tau, fs, *, window_s=WINDOW_S, band_hz=BAND_HZ, alpha=
     sigma, cuts, best = {}, {}, {}
     for p in PARAMS:
         v = tr[p]
-        sigma[p] = max(window_sigma(v, tr["halves"][:, :, PARAMS.index(p)]),
+        sigma[p] = max(window_sigma(v, tr["errors"][:, :, PARAMS.index(p)]),
                        1e-12 * max(np.abs(v).max(), 1e-300))
         z = (v - v.mean()) / sigma[p]
         cp = change_points(z, threshold, intervals)
