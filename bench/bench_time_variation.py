@@ -4,7 +4,9 @@ labels, Wilson 95 % intervals.
 
 Each recording: ``labsim.draw(kind, default_rng([seed, 20, k]))`` (60 s, 1 kHz, one
 joint), the test run on its measured theta and tau_h (the truth is only read to score).
-A time-varying recording counts as "a change a lab would act on" when its truth's K
+On the stationary kinds the table also gives how many had p below alpha (a change found
+before the 10 % reporting threshold) and the track's SD over the test's sigma (K, B, I:
+near 1 when the noise model is right). A time-varying recording counts as "a change a lab would act on" when its truth's K
 ratio differs from 1 by at least 10 % (the test's reporting threshold, MIN_CHANGE); the
 others are counted apart (neither a hit nor a miss).
 
@@ -27,7 +29,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 import labsim  # noqa: E402
 from benchio import write_results  # noqa: E402
-from estimation.timevarying import MIN_CHANGE, time_variation  # noqa: E402
+from estimation.timevarying import ALPHA, MIN_CHANGE, time_variation  # noqa: E402
 
 VARYING = ("linear_drift", "saturating_drift", "switching", "modulated")
 STATIONARY = ("nominal", "nominal_coloured_noise", "voluntary", "moving_linear")
@@ -52,6 +54,9 @@ def one(kind, k_index, seed):
     return {"kind": kind, "seed": seed, "truth_K_ratio": ratio,
             "time_varying": r.time_varying, "parameter": r.parameter,
             "p_value": r.p_value, "shape": r.shape, "n_blocks": len(r.blocks),
+            # the noise model's check: on a stationary recording the track's own SD
+            # over sigma is near 1 (far above 1: sigma understated, false alarms)
+            "sd_over_sigma": {p: float(np.std(r.track[p]) / r.sigma[p]) for p in "KBI"},
             "cpu_s": time.process_time() - t0}
 
 
@@ -83,11 +88,20 @@ def main(argv=None):
                          f"{summary[kind]['wilson95'][1]:.2f}] | shape right {shape}/{len(big)} |")
         else:
             fa = sum(x["time_varying"] for x in rs)
+            below = sum(x["p_value"] < ALPHA for x in rs)
+            ratio = {p: [x["sd_over_sigma"][p] for x in rs] for p in "KBI"}
             summary[kind] = {"n": len(rs), "false_alarms": fa, "rate": fa / len(rs),
-                             "wilson95": wilson(fa, len(rs))}
+                             "wilson95": wilson(fa, len(rs)), "p_below_alpha": below,
+                             "sd_over_sigma_median": {p: float(np.median(v))
+                                                      for p, v in ratio.items()},
+                             "sd_over_sigma_max": {p: float(np.max(v))
+                                                   for p, v in ratio.items()}}
             table.append(f"| {kind} | false alarm | {fa}/{len(rs)} "
                          f"[{summary[kind]['wilson95'][0]:.2f}, "
-                         f"{summary[kind]['wilson95'][1]:.2f}] | |")
+                         f"{summary[kind]['wilson95'][1]:.2f}] | p < alpha {below}/{len(rs)};"
+                         f" track SD / sigma K, B, I median "
+                         f"{', '.join(f'{np.median(v):.2f}' for v in ratio.values())}, max "
+                         f"{', '.join(f'{np.max(v):.2f}' for v in ratio.values())} |")
     det = [summary[k] for k in VARYING]
     fal = [summary[k] for k in STATIONARY]
     pooled = {"detection": [sum(d["detected"] for d in det), sum(d["n"] for d in det)],

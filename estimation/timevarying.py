@@ -10,12 +10,18 @@ Method (docs/estimation.md, "Time variation"):
    (a linear filter applied to both sides keeps ``tau = I theta'' + B theta' + K theta``
    true, and removes the slow voluntary torque and slow movements); in windows of
    ``window_s`` (1 s) the limb model is fitted by least squares on the filtered angle and
-   its derivatives: one (K, B, I) per window.
-2. **Noise.** The sampling noise of a window's estimate, sigma, from the data: each
-   window is fitted again on its even and on its odd 0.1 s sub-blocks; the two halves
-   see the same (time-averaged) impedance, so their difference is noise alone, even
-   where the impedance changes fast; sigma = MAD scale of the differences / 2
-   (Rousseeuw & Croux 1993; :func:`window_sigma`).
+   its derivatives (the 9-point central difference of estimation.reflex.derivative): one
+   (K, B, I) per window.
+2. **Noise.** The sampling noise of a window's estimate, sigma, from the data: the
+   noise is not white (coloured sensor noise, the subject's slow voluntary torque leaking
+   into the band), and the spread of a window's estimate depends on its serial
+   correlation, so the other windows' residuals (1 s samples of the recording's own
+   noise, correlation intact) are passed through each window's least-squares estimator,
+   a residual block bootstrap (Kuensch 1989); sigma = the per-window MAD scale of those
+   errors (Rousseeuw & Croux 1993; robust to the residuals of windows astride a switch),
+   pooled as a root mean square (:func:`window_sigma`). An earlier even/odd 0.1 s
+   sub-block split missed the noise correlated over more than 0.1 s and understated
+   sigma up to 4.5-fold with voluntary torque (docs/estimation.md).
 3. **Change points.** Seeded binary segmentation (Kovacs, Li, Buehlmann & Munk, Biometrika
    110:249, 2023): CUSUM statistics ``C = sqrt(n_l n_r / n) (mean_l - mean_r) / sigma``
    on a deterministic set of intervals at every scale, split where the narrowest interval
@@ -38,6 +44,8 @@ import numpy as np
 from scipy import signal as sps
 from scipy import stats
 
+from .reflex import derivative
+
 PARAMS = ("K", "B", "I")
 UNITS = {"K": "N m/rad", "B": "N m s/rad", "I": "kg m^2"}
 #: default family-wise false-alarm rate of the test, window [s], band [Hz]
@@ -48,8 +56,11 @@ ALPHA, WINDOW_S, BAND_HZ = 1e-3, 1.0, (3.0, 30.0)
 MIN_INTERVAL, MIN_CHANGE, MIN_BLOCK = 4, 0.10, 2
 #: left out at each end of the record [s]: the band-pass filter's edge transients
 EDGE_S = 2.0
-#: sub-block of the interleaved half-window fits that measure the noise [s]
-SUB_S = 0.1
+#: two windows whose band-passed angles correlate more than this are not used as each
+#: other's noise samples (a periodic perturbation's repeats)
+MAX_ALIKE = 0.3
+#: residuals of at most this many windows are passed through each window's estimator
+MAX_PARTNERS = 100
 #: the seeded intervals' decay from one scale to the next (Kovacs et al. 2023: in [1/2, 1))
 DECAY = 0.5 ** 0.5
 #: windows whose band-passed angle power is below this fraction of the median are left
@@ -162,57 +173,78 @@ def track(theta, tau, fs, *, window_s=WINDOW_S, band_hz=BAND_HZ, sign=None) -> d
     sos = sps.butter(4, [lo, hi], btype="bandpass", fs=fs, output="sos")
     x = sps.sosfiltfilt(sos, theta)
     y = sps.sosfiltfilt(sos, tau)
-    dx = np.gradient(x, 1 / fs)
-    ddx = np.gradient(dx, 1 / fs)
+    dx = derivative(x, fs)
+    ddx = derivative(dx, fs)
     X = np.stack([x, dx, ddx], axis=1)[edge:edge + W * L].reshape(W, L, 3)
     Y = y[edge:edge + W * L].reshape(W, L)
     scale = np.sqrt(np.mean(X ** 2, axis=(0, 1))) + 1e-300  # conditioning only
     Xs = X / scale
     XtX = np.einsum("wli,wlj->wij", Xs, Xs)
     XtY = np.einsum("wli,wl->wi", Xs, Y)
-    coef = np.linalg.solve(XtX, XtY[..., None])[..., 0] / scale
-    half = _interleaved_halves(Xs, Y, L, fs) / scale  # (2, W, 3): the noise check
+    coef_s = np.linalg.solve(XtX, XtY[..., None])[..., 0]
+    coef = coef_s / scale
     if sign is None:
         whole = np.linalg.lstsq(X.reshape(-1, 3), Y.ravel(), rcond=None)[0]
         sign = -1.0 if whole[0] < 0 else 1.0
     coef *= sign
-    half *= sign
     t = (edge + (np.arange(W) + 0.5) * L) / fs
     power = np.mean(X[:, :, 0] ** 2, axis=1)
     keep = power >= MIN_EXCITATION * np.median(power)
-    coef, t, half = coef[keep], t[keep], half[:, keep]
-    return {"t": t, "t0": edge / fs, "n_dropped": int(np.count_nonzero(~keep)),
-            "K": coef[:, 0], "B": coef[:, 1], "I": coef[:, 2],
-            "halves": half, "window_s": L / fs, "sign": float(sign)}
+    residual = Y - np.einsum("wli,wi->wl", Xs, coef_s)
+    errors = sign * _residual_swap_errors(Xs[keep], XtX[keep], residual[keep]) / scale
+    return {"t": t[keep], "t0": edge / fs, "n_dropped": int(np.count_nonzero(~keep)),
+            "K": coef[keep, 0], "B": coef[keep, 1], "I": coef[keep, 2],
+            "errors": errors, "window_s": L / fs, "sign": float(sign)}
 
 
-def _interleaved_halves(Xs, Y, L, fs, sub_s=SUB_S):
-    """Each window fitted twice, on its even and on its odd sub-blocks of ``sub_s``: both
-    halves see the same time-average of a changing impedance, so their difference is
-    sampling noise alone, even where the impedance changes fast (a modulation of a few
-    seconds, which would inflate a noise scale taken from neighbouring windows)."""
-    q = max(1, int(round(sub_s * fs)))
-    parity = (np.arange(L) // q) % 2
-    out = []
-    for k in (0, 1):
-        m = (parity == k).astype(float)
-        A = np.einsum("wli,wlj,l->wij", Xs, Xs, m)
-        b = np.einsum("wli,wl,l->wi", Xs, Y, m)
-        out.append(np.linalg.solve(A, b[..., None])[..., 0])
-    return np.stack(out)
+def _residual_swap_errors(Xs, XtX, E, max_alike=MAX_ALIKE):
+    """The errors the recording's own noise makes in each window's estimate.
+
+    Window w's least-squares error is ``(X_w' X_w)^-1 X_w' e_w``; its spread depends on the
+    noise's serial correlation, not only on its power (sensor noise that is coloured, the
+    slow voluntary torque leaking into the band: both correlated over tenths of a second).
+    The other windows' residuals are 1 s samples of that noise with their correlation
+    intact, so each is passed through window w's estimator (a residual block bootstrap
+    with the windows as blocks; Kuensch 1989, Politis & Romano 1994):
+    ``D[w, v] = (X_w' X_w)^-1 X_w' e_v``, v over at most ``MAX_PARTNERS`` windows spread
+    over the record.
+
+    Parameters: ``Xs`` (W, L, 3) scaled regressors, ``XtX`` (W, 3, 3), ``E`` (W, L) the
+    windows' own residuals (torque units). Returns D (W, V, 3) in the scaled units, NaN
+    where v = w (a residual is orthogonal to its own window's regressors) or where the two
+    windows' angles are alike (|correlation| > ``max_alike``: a periodic perturbation's
+    repeats, whose residuals are orthogonal to this window's regressors too).
+    """
+    W = len(Xs)
+    v = np.unique(np.linspace(0, W - 1, min(W, MAX_PARTNERS)).round().astype(int))
+    G = np.stack([Xs[:, :, i] @ E[v].T for i in range(3)], axis=-1)  # (W, V, 3)
+    D = np.linalg.solve(XtX[:, None], G[..., None])[..., 0]
+    a = Xs[:, :, 0] / (np.linalg.norm(Xs[:, :, 0], axis=1, keepdims=True) + 1e-300)
+    alike = (np.abs(a @ a[v].T) > max_alike) | (np.arange(W)[:, None] == v[None, :])
+    D[alike] = np.nan
+    return D
 
 
-def window_sigma(v, halves=None) -> float:
-    """Sampling noise of one window's estimate. With ``halves`` (2, W): from the
-    differences of the interleaved half-window fits (:func:`_interleaved_halves`; each
-    half has twice the window's variance, so sigma = scale(d) / 2); else from the track's
-    first differences (scale / sqrt 2). The scale is the MAD's (Rousseeuw & Croux 1993),
-    robust to the few windows astride a switch."""
-    if halves is not None:
-        d, k = np.asarray(halves[0] - halves[1], float), 2.0
-    else:
-        d, k = np.diff(np.asarray(v, float)), np.sqrt(2)
-    return float(1.4826 * np.median(np.abs(d - np.median(d))) / k)
+def window_sigma(v, errors=None) -> float:
+    """Sampling noise of one window's estimate [the parameter's unit].
+
+    With ``errors`` (W, V) (:func:`_residual_swap_errors` for one parameter): per window,
+    the MAD scale (Rousseeuw & Croux 1993) of the errors the other windows' residuals
+    make in it (robust to the few residuals of windows astride a switch, which hold the
+    change itself), pooled over the windows as a root mean square (the variance of a
+    block's mean of windows). Without them (or when fewer than MIN_INTERVAL partners are
+    left to a window: a perturbation repeating every window), from the track's first
+    differences (scale / sqrt 2).
+    """
+    if errors is not None:
+        e = np.asarray(errors, float)
+        e = e[np.count_nonzero(np.isfinite(e), axis=1) >= MIN_INTERVAL]
+        if e.size:
+            med = np.nanmedian(e, axis=1, keepdims=True)
+            per_window = 1.4826 * np.nanmedian(np.abs(e - med), axis=1)
+            return float(np.sqrt(np.mean(per_window ** 2)))
+    d = np.diff(np.asarray(v, float))
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2))
 
 
 # ----------------------------------------------------------------------------- change points
@@ -289,7 +321,7 @@ def time_variation(theta, tau, fs, *, window_s=WINDOW_S, band_hz=BAND_HZ, alpha=
     sigma, cuts, best = {}, {}, {}
     for p in PARAMS:
         v = tr[p]
-        sigma[p] = max(window_sigma(v, tr["halves"][:, :, PARAMS.index(p)]),
+        sigma[p] = max(window_sigma(v, tr["errors"][:, :, PARAMS.index(p)]),
                        1e-12 * max(np.abs(v).max(), 1e-300))
         z = (v - v.mean()) / sigma[p]
         cp = change_points(z, threshold, intervals)
