@@ -145,7 +145,8 @@ def _pair_parts(chosen, single, g0_held) -> str:
     test = getattr(chosen, "second_test", None)
     if test and test.get("single_held_out_reduction") is not None:
         alone, both = test["single_held_out_reduction"], test["pair_held_out_reduction"]
-        where = "" if test.get("split") in (None, "default") else f", {test['split']}"
+        where = ("" if test.get("split") in (None, "default")
+                 else f"; held-out split: {test['split']}")
     elif single is not None and single.effects == (a,):
         alone, both = (reduction(g0_held, single.held_out_gap),
                        reduction(g0_held, chosen.held_out_gap))

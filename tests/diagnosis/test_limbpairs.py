@@ -65,14 +65,6 @@ def test_no_false_pair_when_the_reflex_explains_it():
     json.dumps(d.pairs, default=float)  # the rows go to a report
 
 
-def test_without_the_pair_search_only_the_reflex_is_named():
-    """The same channel-delay recording with the pair search off names the reflex alone
-    (what the single-effect catalogue gave before)."""
-    trial, _ = _labsim_trial("channel_delay+reflex", channel_delay_s=0.010)
-    d = _diagnose(trial, pairs=False)
-    assert d.named == ["stretch_reflex"] and d.pairs == []
-
-
 def test_pair_columns_equal_the_single_columns_with_the_partner_off():
     """The pair's design (reflex + a channel delay of 0) is the reflex's own design."""
     trial, _ = _labsim_trial("nominal+reflex", seconds=8.0)
@@ -90,3 +82,39 @@ def test_two_stiffness_effects_are_not_paired():
     assert not lp.pairable("stiffness_drift", "stiffness_saturating")
     assert lp.pairable("stiffness_angle", "stretch_reflex")
     assert lp.pairable("stretch_reflex", "channel_delay")
+
+
+def _fits(adds):
+    from diagnosis.fitting import EffectFit
+    single = EffectFit(("stiffness_angle",), {"stiffness_angle": {"slope_rel": 5.0,
+                                                                 "curvature_rel": 19.0}},
+                       0.3, 10, held_out_gap=0.8, objective=0.3)
+    pair = EffectFit(("stiffness_angle", "stretch_reflex"),
+                     {"stiffness_angle": {"slope_rel": 5.0, "curvature_rel": 19.0},
+                      "stretch_reflex": {"gain": 3.0, "delay_s": 0.04, "frequency_hz": 3.0,
+                                         "rectified": False, "stretch_sign": 1.0}},
+                     0.01, 10, held_out_gap=0.05, objective=0.01)
+    pair.second_test = {"adds": adds, "single_held_out_reduction": 0.2,
+                        "pair_held_out_reduction": 0.95,
+                        "split": "stratified by the scheduling variable"}
+    return single, pair
+
+
+@pytest.mark.parametrize("adds", [True, False])
+def test_the_verdict_names_a_position_pair_only_when_its_second_adds(adds):
+    """pipeline.verdict.choose reads the pair's own held-out test (limbpairs.finish), not
+    the exoskeleton's thresholds; the sentence gives each one's held-out addition."""
+    from diagnosis.config import DiagnosisConfig
+    from diagnosis.pipeline.verdict import choose, verdict_text
+    single, pair = _fits(adds)
+    verdict, named, chosen = choose(True, [single], [pair], 1.0, DiagnosisConfig(),
+                                    best_only=True)
+    if not adds:
+        assert (verdict, named) == ("unexplained", [])
+        return
+    assert (verdict, named) == ("effect", ["stiffness_angle", "stretch_reflex"])
+    text = verdict_text(verdict, named, chosen, 1.0, None, {"amplitude_dependent": False},
+                        best=single)
+    assert text == ("effect: stiffness_angle + stretch_reflex closes 95 % of the held-out gap "
+                    "(stiffness_angle alone 20 %; stretch_reflex adds 75 points; held-out "
+                    "split: stratified by the scheduling variable).")
