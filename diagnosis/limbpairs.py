@@ -86,6 +86,21 @@ def _extra_raw(pr, name, params):
     return None
 
 
+def _extra_lp(pr, name, params):
+    """:func:`_extra_raw` low-passed at the full rate, the last three kept per record (the
+    forward stage varies the second effect only: the first's column is reused)."""
+    key = (name, tuple(sorted((k, float(v)) for k, v in params.items())))
+    cache = pr.__dict__.setdefault("_pair_extra", {})
+    if key in cache:
+        cache[key] = cache.pop(key)  # the most recent last
+        return cache[key]
+    ex = _extra_raw(pr, name, params)
+    if len(cache) >= 3:
+        cache.pop(next(iter(cache)))  # the least recent
+    cache[key] = None if ex is None else pr.lp(ex, decimate=False)
+    return cache[key]
+
+
 def pair_columns(pr, effects: dict):
     """Low-passed design columns (Nd, n, p) of a record with several effects at once, and
     the coefficient slice of each effect's own columns (``{name: slice}``).
@@ -109,9 +124,9 @@ def pair_columns(pr, effects: dict):
         blocks = [pr.base_full.reshape(N, n, 3 * nn)]
     layout, width = {}, 3 * nn
     for k in eff:
-        ex = _extra_raw(pr, k, eff[k])
+        ex = _extra_lp(pr, k, eff[k])
         if ex is not None:
-            blocks.append(pr.lp(ex, decimate=False).reshape(N, n, 1))
+            blocks.append(ex.reshape(N, n, 1))
             layout[k] = slice(width, width + 1)
             width += 1
     full = np.concatenate(blocks, axis=2).reshape(N, -1)

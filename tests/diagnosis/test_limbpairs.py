@@ -118,3 +118,22 @@ def test_the_verdict_names_a_position_pair_only_when_its_second_adds(adds):
     assert text == ("effect: stiffness_angle + stretch_reflex closes 95 % of the held-out gap "
                     "(stiffness_angle alone 20 %; stretch_reflex adds 75 points; held-out "
                     "split: stratified by the scheduling variable).")
+
+
+def test_the_pipeline_names_the_pair_in_report_json(tmp_path):
+    """The whole diagnosis (armimp diagnose) of the written reflex + channel-delay trial:
+    report.json lists both in named_effects and the summary gives each one's addition."""
+    import trialformat as tf
+    from diagnosis.config import DiagnosisConfig
+    from diagnosis.core import diagnose
+    trial, _ = _labsim_trial("channel_delay+reflex", channel_delay_s=0.010)
+    trial.name = "cdr"
+    (tmp_path / "in").mkdir()
+    tf.write_trial(tmp_path / "in" / trial.name, trial)
+    diagnose(tmp_path / "in", tmp_path / "out", workers=1, progress=False,
+             config=DiagnosisConfig(effects=EFFECTS))
+    rep = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert rep["named_effects"] == ["stretch_reflex", "channel_delay"], rep["summary"]
+    assert "(stretch_reflex alone 99" in rep["summary"]
+    assert "channel_delay adds" in rep["summary"]
+    assert rep["pairs"][0]["second_effect_test"]["adds"] is True
