@@ -42,7 +42,12 @@ def main() -> int:
                "rank": angle[0], "held_out_reduction": angle[1]["held_out_reduction"],
                "params": angle[1]["params"], "split": angle[1].get("split")},
            "ranking": [{"effects": r["effects"], "held_out_reduction": r["held_out_reduction"]}
-                       for r in rows]}
+                       for r in rows],
+           # pairs on the best single (diagnosis.limbpairs) with the second's held-out test
+           "pairs": [{"effects": r["effects"], "held_out_reduction": r["held_out_reduction"],
+                      "params": r["params"],
+                      "second_effect_test": r.get("second_effect_test")}
+                     for r in rep.pairs]}
     res = Path(__file__).parent / "results"
     res.mkdir(exist_ok=True)
     (res / "time_state_pilot.json").write_text(json.dumps(out, indent=1, default=float))
