@@ -775,7 +775,10 @@ def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosi
         The verdict is VERDICT_NONE when the nominal gap (all samples) is not significant,
         VERDICT_EFFECT naming the best effect (lowest calibration objective) when its
         fit is inside the search bounds and closes at least ``name_reduction`` of the
-        held-out gap, else VERDICT_UNEXPLAINED.
+        held-out gap, else VERDICT_UNEXPLAINED. When the best single leaves a significant
+        calibration gap, pairs are built on it (``cfg.pairs``, diagnosis.limbpairs): the
+        best pair is named, both effects, when its second adds significantly on held-out
+        data and it closes ``name_reduction`` of the held-out gap.
 
     Raises
     ------
