@@ -120,6 +120,7 @@ def test_the_verdict_names_a_position_pair_only_when_its_second_adds(adds):
                     "split: stratified by the scheduling variable).")
 
 
+@pytest.mark.slow
 def test_the_pipeline_names_the_pair_in_report_json(tmp_path):
     """The whole diagnosis (armimp diagnose) of the written reflex + channel-delay trial:
     report.json lists both in named_effects and the summary gives each one's addition."""
