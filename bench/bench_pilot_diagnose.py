@@ -93,7 +93,12 @@ def main(argv=None) -> int:
                "params": angle[1]["params"], "split": angle[1].get("split")},
            "ranking": [{"effects": r["effects"], "held_out_reduction": r["held_out_reduction"]}
                        for r in rows],
-           "gap": report_json.get("gap")}
+           "gap": report_json.get("gap"),
+           # pairs on the best single (diagnosis.limbpairs) with the second's held-out test
+           "pairs": [{"effects": r["effects"], "held_out_reduction": r["held_out_reduction"],
+                      "params": r["params"],
+                      "second_effect_test": r.get("second_effect_test")}
+                     for r in rep.pairs]}
     res = Path(__file__).parent / "results"
     res.mkdir(exist_ok=True)
     name = "time_state_pilot" + (f"_{args.tag}" if args.tag else "") + ".json"

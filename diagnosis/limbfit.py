@@ -42,6 +42,7 @@ the calibration fit's parameters, K, B and I.
 from __future__ import annotations
 
 import math
+import sys
 import time
 from dataclasses import dataclass, field
 
@@ -51,6 +52,7 @@ from scipy import signal
 
 from . import catalogue as cat
 from . import limb as lm
+from . import limbpairs as lp
 from . import varying_effects as vary
 
 VERDICT_EFFECT = "effect"
@@ -75,6 +77,7 @@ class FitConfig:
     significance_sigma, floor_margin : the nominal gap's significance threshold.
     name_reduction : held-out reduction an effect needs to be named.
     grid : grid points per nonlinear parameter; refine_starts: grid points refined.
+    pairs : try a second effect on top of the best single (diagnosis.limbpairs).
     """
 
     band_hz: float = 30.0
@@ -90,6 +93,7 @@ class FitConfig:
     refine_starts: int = 2
     effects: tuple = ()
     edge_s: tuple = (1.0, 0.5)
+    pairs: bool = True
 
 
 @dataclass
@@ -563,9 +567,11 @@ class PositionDiagnosis:
     """The which / how-far / verdict of a set of position trials.
 
     verdict : VERDICT_EFFECT, VERDICT_NONE or VERDICT_UNEXPLAINED;
-    named : [effect] or [];
+    named : [effect], [first, second] (a pair whose second adds significantly on
+        held-out data, diagnosis.limbpairs) or [];
     fitted : {effect: params} of the named effect; intervals likewise;
     nominal : the nominal fit (limb K, B, I; gaps); ranking : EffectFit dicts, best first;
+    pairs : PairFit dicts built on the best single (diagnosis.limbpairs), best first;
     gap : nominal gaps (calibration, held-out, all), threshold, the named held-out reduction.
     """
 
@@ -578,6 +584,7 @@ class PositionDiagnosis:
     gap: dict
     elapsed_s: float
     n_evaluations: int
+    pairs: list = field(default_factory=list)
 
 
 def _norms(preps):
@@ -788,7 +795,10 @@ def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosi
         The verdict is VERDICT_NONE when the nominal gap (all samples) is not significant,
         VERDICT_EFFECT naming the best effect (lowest calibration objective) when its
         fit is inside the search bounds and closes at least ``name_reduction`` of the
-        held-out gap, else VERDICT_UNEXPLAINED.
+        held-out gap, else VERDICT_UNEXPLAINED. When the best single leaves a significant
+        calibration gap, pairs are built on it (``cfg.pairs``, diagnosis.limbpairs): the
+        best pair is named, both effects, when its second adds significantly on held-out
+        data and it closes ``name_reduction`` of the held-out gap.
 
     Raises
     ------
@@ -811,23 +821,33 @@ def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosi
         fits = vary.prefer_simpler(fits, cfg.name_reduction)
         if fits and cfg.n_jackknife >= 2:
             add_intervals(fits[0], cfg)
+    pairs = lp.search_pairs(sys.modules[__name__], preps, fits, nominal, cfg) \
+        if significant and cfg.pairs else []
+    pair = lp.named_pair(pairs, cfg.name_reduction)
     verdict, named = VERDICT_NONE, []
     if significant:
         verdict = VERDICT_UNEXPLAINED
-        if fits and not fits[0].at_search_bound and fits[0].held_out_reduction is not None \
+        if pair is not None:
+            verdict, named = VERDICT_EFFECT, list(pair.effects)
+        elif fits and not fits[0].at_search_bound and fits[0].held_out_reduction is not None \
                 and fits[0].held_out_reduction >= cfg.name_reduction:
             verdict, named = VERDICT_EFFECT, [fits[0].effect]
     best = fits[0] if named else None
     limb0 = nominal["limb"]
+    fitted = {best.effect: best.params} if best else {}
+    if pair is not None:
+        fitted = dict(pair.params)
     return PositionDiagnosis(
-        verdict=verdict, named=named,
-        fitted={best.effect: best.params} if best else {},
+        verdict=verdict, named=named, fitted=fitted,
         intervals={best.effect: best.intervals} if best else {},
         nominal={"K": limb0.K.tolist(), "B": limb0.B.tolist(), "I": limb0.I.tolist()},
         ranking=[f.as_dict() for f in fits],
+        pairs=[p.as_dict() for p in pairs],
         gap={"nominal_all": g["all"].value, "nominal_calibration": g["cal"].value,
              "nominal_held_out": g["held"].value, "nominal_excess": g["all"].excess,
              "significance_threshold": threshold, "noise_floor": g["all"].floor,
-             "named_held_out_reduction": best.held_out_reduction if best else None},
+             "named_held_out_reduction": (pair.held_out_reduction if pair is not None
+                                          else best.held_out_reduction if best else None)},
         elapsed_s=time.perf_counter() - t0,
-        n_evaluations=sum(f.n_evaluations for f in fits))
+        n_evaluations=sum(f.n_evaluations for f in fits) + sum(p.n_evaluations
+                                                                 for p in pairs))

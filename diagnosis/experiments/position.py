@@ -107,7 +107,8 @@ class PositionServo(Experiment):
         variable projection (diagnosis.limbfit: K, B, I and the effect's gain-like
         parameters linear, the others searched), calibrated on the first
         ``config.time_split_fraction`` of every trial, its gap on the rest (held out);
-        95 % jackknife intervals for the best fit.
+        95 % jackknife intervals for the best fit; pairs built on the best fit
+        (diagnosis.limbpairs) when it leaves a significant calibration gap.
 
         ``store`` (pipeline.resume.ResumeStore, optional): every finished fit, and the
         best fit's intervals, are written to it atomically as they finish and read back
@@ -124,7 +125,8 @@ class PositionServo(Experiment):
         -------
         dict
             ``fits`` (fitting.EffectFit, best first, each with ``intervals`` and the
-            re-estimated limb as ``model``), ``g0_cal``, ``g0_held``, ``g0_all``,
+            re-estimated limb as ``model``), ``pairs`` (fitting.EffectFit of two effects,
+            best first, each with its second effect's held-out test ``second_test``), ``g0_cal``, ``g0_held``, ``g0_all``,
             ``significant``, ``threshold``, ``noise_floor``, ``measure``.
         """
         from .. import limbfit as lf
@@ -164,6 +166,15 @@ class PositionServo(Experiment):
                                        "limb_ci": d.get("limb_ci")})
             best.intervals, best.n_evaluations = ci["intervals"], int(ci["n"])
             best.limb_ci = ci["limb_ci"]
+        pairs = []
+        if fits and significant and cfg.pairs:
+            from .. import limbpairs as lp
+            import sys as _sys
+            pairs = _resumable(
+                store, ("limbfit-pairs", fits[0].effect, repr(cfg)),
+                lambda: lp.search_pairs(_sys.modules[lf.__name__], preps, fits, nominal, cfg),
+                lambda ps: [p.as_dict() for p in ps],
+                lambda d: [lp.PairFit.from_dict(x) for x in d])
         out = []
         for f in fits:
             fit = EffectFit((f.effect,), {f.effect: dict(f.params)}, f.calibration_gap,
@@ -185,7 +196,8 @@ class PositionServo(Experiment):
             fit.bound_flags = [x for x in f.at_search_bound if x not in shown
                                and not x.endswith("< 0 (unphysical)")]
             out.append(fit)
-        return {"fits": out, "g0_cal": g["cal"].value, "g0_held": g["held"].value,
+        return {"fits": out, "pairs": [_pair_fit(p, trials[0].fs) for p in pairs],
+                "g0_cal": g["cal"].value, "g0_held": g["held"].value,
                 "g0_all": g["all"].value, "significant": significant,
                 "threshold": float(cfg.significance_sigma * g["all"].se
                                    + cfg.floor_margin * g["all"].floor),
@@ -259,6 +271,22 @@ def _fit_on_workers(runner, names, preps, nominal, cfg, store):
         else:
             fits.append(lf.fit_from_record(preps, results[todo.index(nm)], nominal, cfg))
     return fits
+
+
+def _pair_fit(p, fs):
+    """A fitting.EffectFit of a limbpairs.PairFit (its second effect's held-out test as
+    ``second_test``, which pipeline.verdict.pair_earns_second reads)."""
+    from .. import limbfit as lf
+    from ..fitting import EffectFit
+    fit = EffectFit(tuple(p.effects), {k: dict(v) for k, v in p.params.items()},
+                    p.calibration_gap, p.n_evaluations, held_out_gap=p.held_out_gap,
+                    objective=p.calibration_objective)
+    fit.model = model_of(p.limb, fs, "limbfit with " + " + ".join(p.effects))
+    fit.value_flags = [(k, g, "< 0 (unphysical)") for k in p.effects
+                       for g in lf.LINEAR.get(k, ()) if p.params[k][g] < 0]
+    fit.second_test = dict(p.test)
+    fit.split = p.split
+    return fit
 
 
 def _resumable(store, key, compute, to_json, from_json):

@@ -34,6 +34,9 @@ def ranking_row(fit, g0_cal: float, g0_held: float) -> dict:
             **({"intervals": fit.intervals} if getattr(fit, "intervals", None) else {}),
             # the held-out split of a varying effect (diagnosis.varying_effects) and why
             **({"split": fit.split} if getattr(fit, "split", None) else {}),
+            # a position pair's second effect on held-out data (diagnosis.limbpairs)
+            **({"second_effect_test": fit.second_test}
+               if getattr(fit, "second_test", None) else {}),
             **({"preferred_over": fit.preferred_over}
                if getattr(fit, "preferred_over", None) else {})}
 

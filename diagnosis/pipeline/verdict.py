@@ -103,7 +103,9 @@ def choose(significant, singles, pairs, g0_held, cfg, *, best_only: bool = False
     best = next((f for f in singles[:1 if best_only else len(singles)] if f.nameable), None)
     if best is None:
         return VERDICT_UNEXPLAINED, [], None
-    chosen = next((p for p in pairs if p.nameable and p.effects[0] == best.effects[0]
+    # best_only: as for the singles, only the best-ranked pair can be named
+    chosen = next((p for p in pairs[:1 if best_only else len(pairs)]
+                   if p.nameable and p.effects[0] == best.effects[0]
                    and pair_earns_second(p, best, cfg)), best)
     share = reduction(g0_held, chosen.held_out_gap)
     if share >= cfg.confident_fraction:
@@ -126,11 +128,42 @@ def verdict_text(verdict, named, chosen, g0_held, residual, amplitude, best=None
         return ("unexplained: " + _not_named(best, g0_held, best_params) + "; the gap lies in "
                 + "; ".join(rest_where(residual)) + "." + amp)
     share = 100 * reduction(g0_held, chosen.held_out_gap)
-    text = f"{' + '.join(named)} closes {share:.0f} % of the held-out gap"
+    text = f"{' + '.join(named)} closes {share:.0f} % of the held-out gap" + _pair_parts(
+        chosen, best, g0_held)
     if verdict == VERDICT_PARTLY:
         return ("partly explained: " + text + "; the rest lies in "
                 + "; ".join(rest_where(residual)) + "." + amp)
     return f"{verdict}: {text}." + amp
+
+
+def _pair_parts(chosen, single, g0_held) -> str:
+    """`` (A alone 20 % of it; B adds 35 points)`` for a named pair: each effect's
+    held-out addition (a position pair's own test, on the split it was judged on; else
+    the single's held-out reduction); "" for a single."""
+    if chosen is None or len(chosen.effects) < 2:
+        return ""
+    a, b = chosen.effects[:2]
+    test = getattr(chosen, "second_test", None)
+    if test and test.get("single_held_out_reduction") is not None:
+        alone, both = test["single_held_out_reduction"], test["pair_held_out_reduction"]
+        where = ("" if test.get("split") in (None, "default")
+                 else f"; held-out split: {test['split']}")
+    elif single is not None and single.effects == (a,):
+        alone, both = (reduction(g0_held, single.held_out_gap),
+                       reduction(g0_held, chosen.held_out_gap))
+        where = ""
+    else:
+        return ""
+    if not (math.isfinite(alone) and math.isfinite(both)):
+        return ""
+    pts = 100 * (both - alone)
+    return (f" ({a} alone {100 * alone:.{_digits(alone)}f} %; {b} adds "
+            f"{pts:.{1 if abs(pts) < 10 else 0}f} points{where})")
+
+
+def _digits(share: float) -> int:
+    """Decimals that keep a share close to 100 % apart from 100 (99.3, not 99)."""
+    return 1 if 0.99 <= share < 1.0 else 0
 
 
 def _not_named(best, g0_held, params=None) -> str:
@@ -160,7 +193,14 @@ def pair_earns_second(pair: EffectFit, single: EffectFit, cfg: DiagnosisConfig) 
     nominal-vs-nominal noise can do), with the second effect fitted above its measured
     detectability floor (catalogue.below_detectability). A second effect that only fits
     the calibration units, or at a strength no data set shows, is absorbing noise or model
-    error, not measuring an effect."""
+    error, not measuring an effect. A pair with its own ``second_test`` (the position
+    servo's, diagnosis.limbpairs) gives the answer of that test, made in its measure."""
+    test = getattr(pair, "second_test", None)
+    if test is not None:
+        # a fit that measured its own held-out test (diagnosis.limbpairs.finish: the drop
+        # above the significance threshold of the single's held-out residual, the
+        # calibration gap down, the second above its detectability floor)
+        return bool(test.get("adds"))
     second = pair.effects[-1]
     held_drop = single.held_out_gap - pair.held_out_gap
     return bool(pair.calibration_gap < cfg.pair_gain * single.calibration_gap

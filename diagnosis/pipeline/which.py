@@ -27,10 +27,11 @@ def run(r) -> None:
     own = getattr(r.experiment, "fit_effects", None)
     if own is not None:
         out = own(r.trials, r.effects, r.config, store=r.resume, runner=r.runner)
-        r.singles, r.pairs = out["fits"], []
+        r.singles, r.pairs = out["fits"], list(out.get("pairs", []))
         r.g0_cal, r.g0_held, r.significant = out["g0_cal"], out["g0_held"], out["significant"]
-        r.fit_measure = {k: v for k, v in out.items() if k not in ("fits", "nominal_limb")}
-        r.n_worker_sims += sum(f.n_evaluations for f in r.singles)
+        r.fit_measure = {k: v for k, v in out.items()
+                         if k not in ("fits", "pairs", "nominal_limb")}
+        r.n_worker_sims += sum(f.n_evaluations for f in r.singles + r.pairs)
         return
     norms = (r.ev_cal.norms, r.ev_held.norms)
     key = lambda f: (f.calibration_gap, f.objective)  # noqa: E731

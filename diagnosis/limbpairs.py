@@ -1,0 +1,509 @@
+"""Pairs of position-servo effects (docs/diagnosis.md, "Pairs on position trials").
+
+The exoskeleton diagnosis tries the named effect's residual against a second effect
+(diagnosis.fitting.fit_second / refine_pair); this is the same forward selection for the
+variable projection of diagnosis.limbfit:
+
+1. the best single A (the one that would be named: lowest calibration objective, not
+   flagged) leaves a calibration gap that is still significant (above
+   ``significance_sigma`` standard errors of its Welch estimate plus ``floor_margin``
+   times the floor: the test the nominal gap passes before any effect is fitted);
+2. every other candidate B that can pair with A (:func:`pairable`) is fitted on top of it:
+   A's nonlinear parameters (and discrete choices) fixed at its single fit, B's searched
+   on its grid and refined (its discrete choices in turn), K, B, I and both effects'
+   gain-like parameters from one least-squares solve; a torque-channel B (a delay, a
+   sensor lag) delays A's torque too, so a delay of A is then held at its single value
+   *minus* B's lag (:func:`channel_lag_s`): the single measured A's total delay;
+3. the :data:`N_REFINED` pairs with the lowest calibration objective get one joint
+   Nelder-Mead step on the nonlinear parameters of both; the pairs are ranked again;
+4. that pair (the best only, as a single is named only when it ranks first) is named,
+   both effects, when its second effect *adds significantly on held-out data*
+   (:func:`second_adds`): the held-out gap drops from the single's by more than the same
+   significance threshold taken on the single's held-out residual, the calibration gap
+   drops too, no parameter of the pair is flagged (a search bound, a negative gain) and
+   B's parameters are above its detectability floor.
+
+A time- or state-varying effect in a pair is judged on its own held-out split
+(diagnosis.varying_effects.split_masks); the single it is compared with is then solved
+on that split too (its nonlinear parameters kept), so the drop compares like with like;
+the pair's gaps are reported on the default split's scale as the varying singles' are.
+Two effects that both change the limb's stiffness (the varying ones, the amplitude
+dependence, the drift) are not paired: together they are one richer stiffness model.
+"""
+
+from __future__ import annotations
+
+import math
+from contextlib import nullcontext
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize
+from scipy import signal
+
+from . import catalogue as cat
+from . import limb as lm
+from . import varying_effects as vary
+
+#: effects that change the limb's own stiffness (never two in one pair)
+STIFFNESS_FAMILY = ("stiffness_amplitude", "stiffness_drift") + vary.EFFECTS
+SCALED = ("stiffness_amplitude", "stiffness_drift")
+#: the parameters a varying effect's columns read (the others are solved or read)
+VARYING_SEARCHED = {"stiffness_saturating": ("time_constant_s",),
+                    "stiffness_modulated": ("period_s",)}
+
+
+#: forward pairs (best calibration objective first) refined jointly: a first effect that
+#: absorbed part of the second in its single fit (a reflex delay that took a channel
+#: delay's 10 ms) is moved back only by the joint step, and the best forward pair is not
+#: always the best refined one
+N_REFINED = 3
+
+
+def pairable(a: str, b: str) -> bool:
+    """True when ``b`` can be fitted on top of ``a`` (module docstring)."""
+    return a != b and not (a in STIFFNESS_FAMILY and b in STIFFNESS_FAMILY)
+
+
+def searched(lf, name: str) -> list:
+    """The catalogue parameters searched for ``name`` in a pair (nonlinear ones)."""
+    if vary.is_varying(name):
+        keep = VARYING_SEARCHED.get(name, ())
+        return [p for p in cat.get_effect(name).parameters if p.name in keep]
+    return lf._nonlinear(name)
+
+
+# ----------------------------------------------------------------------------- columns
+def _extra_raw(pr, name, params):
+    """Full-rate (N, n) torque column of a limb effect solved by its gain, or None."""
+    if name == "stretch_reflex":
+        return lm.reflex_torque(pr.omega, pr.fs, params)
+    if name == "wobbling_mass":
+        p = lm.effect_params(name, params)
+        b, a = lm.second_order_lowpass(float(p["frequency_hz"]), float(p["damping"]),
+                                       pr.fs, numerator="spring_damper")
+        return signal.lfilter(b, a, pr.alpha, axis=0)
+    return None
+
+
+def _extra_lp(pr, name, params):
+    """:func:`_extra_raw` low-passed at the full rate, the last three kept per record (the
+    forward stage varies the second effect only: the first's column is reused)."""
+    key = (name, tuple(sorted((k, float(v)) for k, v in params.items())))
+    cache = pr.__dict__.setdefault("_pair_extra", {})
+    if key in cache:
+        cache[key] = cache.pop(key)  # the most recent last
+        return cache[key]
+    ex = _extra_raw(pr, name, params)
+    if len(cache) >= 3:
+        cache.pop(next(iter(cache)))  # the least recent
+    cache[key] = None if ex is None else pr.lp(ex, decimate=False)
+    return cache[key]
+
+
+def pair_columns(pr, effects: dict):
+    """Low-passed design columns (Nd, n, p) of a record with several effects at once, and
+    the coefficient slice of each effect's own columns (``{name: slice}``).
+
+    ``effects``: {name: nonlinear params and choices} (servo_bandwidth is ignored here:
+    it acts on the angle). Layout: the 3 n^2 K, B, I columns (times the stiffness scale
+    of an amplitude or drift effect), one column per gain-like effect (reflex, wobbling
+    mass), the torque channel's effects (lag, delay) applied to all of these, then a
+    varying effect's basis columns (diagnosis.varying_effects.columns, on the channel's
+    K and B columns).
+    """
+    from .limbfit import _with_unit_linear
+    n, N, nn = pr.n, pr.N, pr.n * pr.n
+    eff = {k: _with_unit_linear(k, v) for k, v in effects.items() if k != "servo_bandwidth"}
+    scaled = {k: eff[k] for k in eff if k in SCALED}
+    if scaled:
+        scale = lm.stiffness_scale(pr.rec.theta, pr.fs, scaled)
+        blocks = [pr.lp(pr.intrinsic_raw(scale).reshape(N, -1),
+                        decimate=False).reshape(N, n, 3 * nn)]
+    else:
+        blocks = [pr.base_full.reshape(N, n, 3 * nn)]
+    layout, width = {}, 3 * nn
+    for k in eff:
+        ex = _extra_lp(pr, k, eff[k])
+        if ex is not None:
+            blocks.append(ex.reshape(N, n, 1))
+            layout[k] = slice(width, width + 1)
+            width += 1
+    full = np.concatenate(blocks, axis=2).reshape(N, -1)
+    channel = {k: eff[k] for k in eff if k in lm.CHANNEL_EFFECTS}
+    if channel:
+        full = lm.channel_apply(full, pr.fs, channel)
+    cols = full[::pr.D][:pr.Nd].reshape(pr.Nd, n, -1)
+    for k in eff:
+        if not vary.is_varying(k):
+            continue
+        phi, quasi = vary.basis(pr, k, eff[k])
+        phi_d = phi[::pr.D][:pr.Nd]
+        extra = [cols[:, :, :2 * nn] * phi_d[:, m, None, None] for m in range(phi_d.shape[1])]
+        if quasi is not None:
+            q = quasi[::pr.D][:pr.Nd]
+            for m in range(q.shape[1]):
+                c = np.zeros((pr.Nd, n, n))
+                for j in range(n):
+                    c[:, j, j] = q[:, m]
+                extra.append(c)
+        ext = np.concatenate(extra, axis=2)
+        layout[k] = slice(width, width + ext.shape[2])
+        width += ext.shape[2]
+        cols = np.concatenate([cols, ext], axis=2)
+    return cols, layout
+
+
+# ----------------------------------------------------------------------------- problem
+class PairProblem:
+    """Calibration objective of a pair over the nonlinear parameters of both effects.
+
+    ``fixed``: {name: discrete choices (and, for a varying effect, nothing else)};
+    ``split``: the varying effect's (calibration, held-out) masks per record, or None.
+    """
+
+    def __init__(self, lf, preps, names, fixed, cfg, split=None, unit=1.0):
+        self.lf, self.preps, self.names, self.cfg = lf, preps, tuple(names), cfg
+        self.fixed = {k: dict(fixed.get(k, {})) for k in self.names}
+        self.nl = [(k, p) for k in self.names for p in searched(lf, k)]
+        self.split, self.unit, self.n_eval = split, unit or 1.0, 0
+
+    def context(self):
+        return vary.swapped(self.preps, self.split) if self.split is not None else nullcontext()
+
+    #: (first effect's delay at its single fit, its bounds) while the forward stage keeps
+    #: the first's total delay through a channel partner (:func:`fit_second`), else None
+    coupled = None
+
+    def params(self, x) -> dict:
+        out = {k: dict(v) for k, v in self.fixed.items()}
+        for (k, p), xi in zip(self.nl, x):
+            out[k][p.name] = self.lf._from_x(p, xi)
+        if self.coupled is not None:
+            a, b = self.names
+            total, (lo, hi) = self.coupled
+            out[a]["delay_s"] = min(max(total - channel_lag_s(b, out[b]), lo), hi)
+        return out
+
+    def evaluate(self, params: dict):
+        """(objective, solution, angle residuals, layout); inf when the columns fail."""
+        self.n_eval += 1
+        lf = self.lf
+        with self.context():
+            try:
+                built = [pair_columns(pr, params) for pr in self.preps]
+            except ValueError:
+                return math.inf, None, None, None
+            sol = lf._solve(self.preps, [c for c, _ in built])
+            ang = [lf._angle_residual(pr, params.get("servo_bandwidth")) for pr in self.preps]
+            obj = sol.cal_energy
+            for pr, a in zip(self.preps, ang):
+                if a is not None:
+                    obj += float(np.sum(a[pr.cal] ** 2)) / pr.theta_norm ** 2
+        return obj, sol, ang, built[0][1]
+
+    def objective(self, x):
+        return self.evaluate(self.params(x))[0] / self.unit
+
+    def search(self, x0, free):
+        """Grid over the coordinates ``free`` (indices into ``nl``; the others at ``x0``),
+        the best ``refine_starts`` points refined over those coordinates by Nelder-Mead."""
+        x0 = np.asarray(x0, float)
+        if not free:
+            return x0
+        band = min(pr.band for pr in self.preps)
+        grids = []
+        for i in free:
+            k, p = self.nl[i]
+            n = (vary.PERIOD_GRID if k == "stiffness_modulated" else self.cfg.grid
+                 if len(free) == 1 else
+                 max(6, int(self.cfg.grid * (1.3 if p.name == "delay_s" else 0.7))))
+            # coupled to a first effect's delay, a channel delay's misfit has basins
+            # about 1 ms wide (a reflex over a 10 ms delay, measured): a grid 4 times
+            # finer than the single's (1 / (32 band) apart)
+            fine = self.coupled is not None and p.name == "delay_s"
+            grids.append([self.lf._to_x(p, v)
+                          for v in self.lf._grid(p, n, band * (4.0 if fine else 1.0))])
+        pts = np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(grids), -1).T
+
+        def full(sub):
+            x = x0.copy()
+            x[list(free)] = sub
+            return x
+        vals = [self.objective(full(pt)) for pt in pts]
+        best_x, best_v = x0, math.inf
+        for i in np.argsort(vals)[:self.cfg.refine_starts]:
+            if not np.isfinite(vals[i]):
+                continue
+            sub = self._refine(lambda s: self.objective(full(s)), pts[i])
+            v = self.objective(full(sub))
+            if v < best_v:
+                best_x, best_v = full(sub), v
+        return best_x
+
+    @staticmethod
+    def _refine(fn, x0, step=0.03, maxiter=None):
+        x0 = np.asarray(x0, float)
+        simplex = [x0] + [x0 + np.eye(len(x0))[i] * (step if x0[i] < 0.5 else -step)
+                          for i in range(len(x0))]
+        res = optimize.minimize(fn, x0, method="Nelder-Mead",
+                                options={"initial_simplex": np.array(simplex),
+                                         "xatol": 2e-5, "fatol": 1e-8,
+                                         "maxiter": maxiter or 40 * len(x0)})
+        return res.x
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass
+class PairFit:
+    """A pair fitted on the calibration part (effects: (first, second)).
+
+    params : {effect: its parameters, as the single fits report them};
+    calibration_gap, held_out_gap : on the default split's scale (relative gaps above
+    noise); held_out_reduction : 1 - held-out gap / nominal held-out gap;
+    test : the second effect's held-out addition (:func:`second_adds`): the single's and
+    the pair's raw gaps on the split they share, the drop, the threshold, ``adds``.
+    """
+
+    effects: tuple
+    params: dict
+    limb: lm.LimbModel
+    calibration_objective: float
+    calibration_gap: float
+    held_out_gap: float
+    held_out_reduction: float | None
+    at_search_bound: list = field(default_factory=list)
+    n_evaluations: int = 0
+    test: dict = field(default_factory=dict)
+    split: dict | None = None
+
+    @property
+    def adds(self) -> bool:
+        return bool(self.test.get("adds"))
+
+    def as_dict(self) -> dict:
+        return {"effects": list(self.effects), "params": self.params,
+                "K": self.limb.K.tolist(), "B": self.limb.B.tolist(), "I": self.limb.I.tolist(),
+                "calibration_objective": self.calibration_objective,
+                "calibration_gap": self.calibration_gap, "held_out_gap": self.held_out_gap,
+                "held_out_reduction": self.held_out_reduction,
+                "at_search_bound": self.at_search_bound, "n_evaluations": self.n_evaluations,
+                "second_effect_test": self.test,
+                **({"split": self.split} if self.split else {})}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PairFit":
+        return cls(tuple(d["effects"]), d["params"], lm.LimbModel(d["K"], d["B"], d["I"]),
+                   float(d["calibration_objective"]), float(d["calibration_gap"]),
+                   float(d["held_out_gap"]),
+                   None if d["held_out_reduction"] is None else float(d["held_out_reduction"]),
+                   list(d["at_search_bound"]), int(d["n_evaluations"]),
+                   dict(d["second_effect_test"]), d.get("split"))
+
+
+def _split_of(preps, names):
+    """(masks per record, info) of the varying effect among ``names``, or (None, None)."""
+    v = [k for k in names if vary.is_varying(k)]
+    if not v:
+        return None, None
+    masks = [vary.split_masks(pr, v[0]) for pr in preps]
+    return [(c, h) for c, h, _, _ in masks], {"rule": masks[0][2], "why": masks[0][3]}
+
+
+def _gaps(lf, preps, sol, ang, limb0, cfg, split):
+    ctx = vary.swapped(preps, split) if split is not None else nullcontext()
+    with ctx:
+        return (lf._gap(preps, sol.residual, ang, limb0, cfg, "cal"),
+                lf._gap(preps, sol.residual, ang, limb0, cfg, "held"))
+
+
+def _single_reference(lf, preps, single, nominal, cfg, split):
+    """(calibration _Gap, held-out _Gap) of the single fit solved on ``split`` (its
+    nonlinear parameters kept; its own split when it is varying)."""
+    prob, x, _ = single._problem
+    ctx = vary.swapped(preps, split) if split is not None else nullcontext()
+    with ctx:
+        _, sol, ang = prob.evaluate(prob.params(x))
+    return _gaps(lf, preps, sol, ang, nominal["limb"], cfg, split)
+
+
+def _nominal_on(lf, preps, nominal, cfg, split):
+    """(calibration, held-out) nominal gap values on ``split`` (the default: as fitted)."""
+    if split is None:
+        return nominal["gaps"]["cal"].value, nominal["gaps"]["held"].value
+    with vary.swapped(preps, split):
+        sol = lf._solve(preps, [pr.base for pr in preps])
+        ang = [lf._angle_residual(pr, None) for pr in preps]
+    g = _gaps(lf, preps, sol, ang, nominal["limb"], cfg, split)
+    return g[0].value, g[1].value
+
+
+def _choices(name):
+    e = cat.get_effect(name)
+    if not e.choices:
+        return [{}]
+    from itertools import product
+    out = [dict(zip(e.choices, combo)) for combo in product(*e.choices.values())]
+    return [c for c in out if c.get("rectified", True) or c.get("stretch_sign", 1.0) > 0]
+
+
+def _first_fixed(lf, single):
+    """(discrete choices, nonlinear values) of the single fit's effect."""
+    name = single.effect
+    e = cat.get_effect(name)
+    choices = {k: single.params[k] for k in e.choices}
+    values = {p.name: float(single.params[p.name]) for p in searched(lf, name)}
+    return choices, values
+
+
+def channel_lag_s(name, params) -> float:
+    """The low-frequency lag [s] a torque-channel effect adds to every torque (a delay's
+    delay, a first-order lag's time constant); 0 for the other effects."""
+    if name == "channel_delay":
+        return float(params["delay_s"])
+    if name == "torque_sensor_lag":
+        return float(params["time_constant_s"])
+    return 0.0
+
+
+def fit_second(lf, preps, single, other, nominal, cfg):
+    """Forward selection: ``other`` fitted on top of the single fit (a limbfit.EffectFit
+    with its ``_problem``), the single's nonlinear parameters fixed.
+
+    Returns (PairProblem, x, objective) of the best discrete choice of ``other``."""
+    split, _ = _split_of(preps, (single.effect, other))
+    choices_a, values_a = _first_fixed(lf, single)
+    best = None
+    n_eval = 0
+    for ch in _choices(other):
+        prob = PairProblem(lf, preps, (single.effect, other),
+                           {single.effect: choices_a, other: ch}, cfg, split,
+                           nominal["solution"].cal_energy)
+        x0 = np.array([lf._to_x(p, values_a[p.name]) if k == single.effect else 0.5
+                       for k, p in prob.nl])
+        free = [i for i, (k, _) in enumerate(prob.nl) if k == other]
+        ia = next((i for i, (k, p) in enumerate(prob.nl)
+                   if k == single.effect and p.name == "delay_s"), None)
+        if other in lm.CHANNEL_EFFECTS and ia is not None:
+            # the single's delay is the first effect's total delay as measured through
+            # the torque channel: a channel partner takes its share of it (a reflex fitted
+            # at 52 ms over a 10 ms channel delay; the pair's misfit between the two
+            # splittings is higher than at either, so a local step never finds it)
+            prob.coupled = (values_a["delay_s"], prob.nl[ia][1].bounds)
+            x = prob.search(x0, free)
+            x[ia] = lf._to_x(prob.nl[ia][1], prob.params(x)[single.effect]["delay_s"])
+            prob.coupled = None
+        else:
+            x = prob.search(x0, free)
+        obj = prob.objective(x)
+        n_eval += prob.n_eval
+        if best is None or obj < best[2]:
+            best = (prob, x, obj)
+    best[0].n_eval = n_eval
+    return best
+
+
+def refine(prob, x):
+    """One joint Nelder-Mead step over both effects' nonlinear parameters."""
+    if not prob.nl:
+        return np.asarray(x, float)
+    x1 = prob._refine(prob.objective, x, step=0.03, maxiter=40 * len(prob.nl))
+    return x1 if prob.objective(x1) <= prob.objective(x) else np.asarray(x, float)
+
+
+def _reported(lf, preps, name, params, coef, layout):
+    """The effect's parameters as its single fit reports them (gains from the solve)."""
+    nn = preps[0].n ** 2
+    if vary.is_varying(name):
+        sub = np.concatenate([coef[:3 * nn], coef[layout[name]]])
+        return vary.summary(preps, name, params, sub)
+    e = cat.get_effect(name)
+    lin = {k: float(coef[layout[name]][i]) for i, k in enumerate(lf.LINEAR.get(name, ()))}
+    full = {**params, **lin}
+    out = {p.name: float(full[p.name]) for p in e.parameters}
+    out.update({k: params[k] for k in e.choices})
+    return out
+
+
+def finish(lf, preps, single, prob, x, nominal, cfg) -> PairFit:
+    """The PairFit of ``prob`` at ``x``: gaps, parameters, flags and the second's test."""
+    params = prob.params(x)
+    obj, sol, ang, layout = prob.evaluate(params)
+    n = preps[0].n
+    limb0 = nominal["limb"]
+    g_cal, g_held = _gaps(lf, preps, sol, ang, limb0, cfg, prob.split)
+    r_cal, r_held = _single_reference(lf, preps, single, nominal, cfg, prob.split)
+    n_cal, n_held = _nominal_on(lf, preps, nominal, cfg, prob.split)
+    d_cal, d_held = nominal["gaps"]["cal"].value, nominal["gaps"]["held"].value
+    scale_cal = d_cal / n_cal if prob.split is not None and n_cal > 0 else 1.0
+    scale_held = d_held / n_held if prob.split is not None and n_held > 0 else 1.0
+    out = {k: _reported(lf, preps, k, params[k], sol.coef, layout) for k in prob.names}
+    flags = []
+    for k in prob.names:
+        flags += [f"{k}: {m}" for m in cat.at_search_bound(k, out[k])]
+        flags += [f"{k}: {g} = {out[k][g]:.4g} < 0 (unphysical)"
+                  for g in lf.LINEAR.get(k, ()) if out[k][g] < 0]
+    second = prob.names[1]
+    drop = r_held.excess - g_held.excess
+    threshold = cfg.significance_sigma * r_held.se + cfg.floor_margin * r_held.floor
+    single_red = None if n_held <= 0 else 1.0 - r_held.value / n_held
+    pair_red = None if n_held <= 0 else 1.0 - g_held.value / n_held
+    test = {"single_held_out_gap": r_held.value, "pair_held_out_gap": g_held.value,
+            "single_calibration_gap": r_cal.value, "pair_calibration_gap": g_cal.value,
+            "held_out_drop": drop, "threshold": threshold,
+            "single_held_out_reduction": single_red, "pair_held_out_reduction": pair_red,
+            "second_adds_points": None if pair_red is None else pair_red - single_red,
+            "below_detectability": bool(cat.below_detectability(second, out[second])),
+            "split": "default" if prob.split is None else
+            _split_of(preps, prob.names)[1]["rule"]}
+    test["adds"] = bool(not flags and drop > threshold and g_cal.excess < r_cal.excess
+                        and not test["below_detectability"])
+    return PairFit(prob.names, out, lf._limb_from(sol.coef, n),
+                   obj, g_cal.value * scale_cal, g_held.value * scale_held,
+                   None if n_held <= 0 else 1.0 - g_held.value / n_held, flags,
+                   prob.n_eval, test,
+                   None if prob.split is None else _split_of(preps, prob.names)[1])
+
+
+def needs_pair(lf, preps, single, nominal, cfg) -> bool:
+    """The single's calibration residual is still significant (module docstring, 1)."""
+    if single.at_search_bound or not hasattr(single, "_problem"):
+        return False
+    r_cal, _ = _single_reference(lf, preps, single, nominal, cfg,
+                                 getattr(single._problem[0], "split", None))
+    return bool(r_cal.significant(cfg))
+
+
+def search_pairs(lf, preps, fits, nominal, cfg, partners=None) -> list:
+    """Pairs built on ``fits[0]`` (limbfit.EffectFit's, best first), best first: every
+    pairable partner forward-selected, the best N_REFINED refined jointly. [] when the best single
+    is flagged or leaves no significant calibration gap."""
+    if not fits or not needs_pair(lf, preps, fits[0], nominal, cfg):
+        return []
+    first = fits[0]
+    names = [f.effect for f in fits[1:] if math.isfinite(f.calibration_objective)]
+    if partners is not None:
+        names = [k for k in names if k in partners]
+    forward = [(k,) + fit_second(lf, preps, first, k, nominal, cfg)
+               for k in names if pairable(first.effect, k)]
+    if not forward:
+        return []
+    forward.sort(key=lambda t: t[3])
+    out = []
+    for i, (k, prob, x, _) in enumerate(forward):
+        if i < N_REFINED:
+            x = refine(prob, x)
+        out.append(finish(lf, preps, first, prob, x, nominal, cfg))
+    out.sort(key=lambda p: p.calibration_objective)
+    return out
+
+
+def named_pair(pairs, name_reduction: float):
+    """The best pair when its second adds significantly and it closes ``name_reduction``
+    of the held-out gap, else None (only the best pair can be named)."""
+    if not pairs:
+        return None
+    p = pairs[0]
+    if p.adds and p.held_out_reduction is not None and p.held_out_reduction >= name_reduction:
+        return p
+    return None

@@ -1,0 +1,140 @@
+"""Pairs of position-servo effects (diagnosis.limbpairs; issue 21, item 4) on labsim
+recordings (the independent simulator, its own reflex and channel forms): the best
+single's residual is tried against a second effect, both are named when the second adds
+significantly on held-out data, and no pair is named when the single explains it all."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import labsim
+from diagnosis import limbfit as lf
+from diagnosis import limbpairs as lp
+
+EFFECTS = ("stretch_reflex", "channel_delay", "wobbling_mass")
+
+
+def _labsim_trial(kind, seed=1, seconds=15.0, channel_delay_s=None):
+    """A labsim recording without a servo reference, band-limited noise perturbation."""
+    spec = labsim.draw(kind, np.random.default_rng(seed), duration_s=seconds)
+    spec = dataclasses.replace(spec, record_reference=False, perturbation=dataclasses.replace(
+        spec.perturbation, kind="noise"))
+    if channel_delay_s is not None:
+        spec.sensors.tau.delay_s = channel_delay_s
+    return labsim.simulate(spec).trial, spec
+
+
+def _diagnose(trial, **kw):
+    return lf.diagnose_position([trial], lf.FitConfig(n_jackknife=0, effects=EFFECTS, **kw))
+
+
+def test_a_reflex_with_a_channel_delay_names_both():
+    """A 10 ms torque-channel delay under a 43 ms reflex: the reflex alone takes the
+    delay (53 ms) and closes 99 %; the pair names both, each delay where it belongs."""
+    trial, spec = _labsim_trial("channel_delay+reflex", channel_delay_s=0.010)
+    d = _diagnose(trial)
+    assert d.named == ["stretch_reflex", "channel_delay"], d.pairs[:1]
+    assert d.fitted["channel_delay"]["delay_s"] == pytest.approx(0.010, abs=0.0015)
+    assert d.fitted["stretch_reflex"]["delay_s"] == pytest.approx(spec.reflex.delay_s,
+                                                                  abs=0.003)
+    test = d.pairs[0]["second_effect_test"]
+    assert test["adds"] and test["held_out_drop"] > test["threshold"]
+
+
+def test_a_reflex_with_a_wobbling_mass_names_both():
+    """labsim's wobbling mass (its own damping) under a reflex: both named, the mass and
+    its frequency near the truth (the catalogue ties the damping at 0.3)."""
+    trial, spec = _labsim_trial("wobbling_other_damping+reflex")
+    d = _diagnose(trial)
+    assert d.named == ["stretch_reflex", "wobbling_mass"], d.pairs[:1]
+    w = d.fitted["wobbling_mass"]
+    assert w["mass"] == pytest.approx(spec.wobbling.inertia, rel=0.5)
+    assert w["frequency_hz"] == pytest.approx(spec.wobbling.f_hz, rel=0.2)
+
+
+def test_no_false_pair_when_the_reflex_explains_it():
+    """A reflex alone: pairs are tried (the single's residual is still significant) but no
+    second effect adds significantly on held-out data; the reflex alone is named."""
+    trial, _ = _labsim_trial("nominal+reflex")
+    d = _diagnose(trial)
+    assert d.pairs, "the pair search did not run"
+    assert d.named == ["stretch_reflex"]
+    assert not any(p["second_effect_test"]["adds"] and p is d.pairs[0] for p in d.pairs)
+    json.dumps(d.pairs, default=float)  # the rows go to a report
+
+
+def test_pair_columns_equal_the_single_columns_with_the_partner_off():
+    """The pair's design (reflex + a channel delay of 0) is the reflex's own design."""
+    trial, _ = _labsim_trial("nominal+reflex", seconds=8.0)
+    cfg = lf.FitConfig(n_jackknife=0)
+    pr = lf.prepare([lf.PositionRecord.from_trial(trial)], cfg)[0]
+    p = {"delay_s": 0.04, "frequency_hz": 2.0, "rectified": True, "stretch_sign": 1.0}
+    single = pr.columns("stretch_reflex", p)
+    both, layout = lp.pair_columns(pr, {"stretch_reflex": p, "channel_delay": {"delay_s": 0.0}})
+    assert layout == {"stretch_reflex": slice(3, 4)}
+    np.testing.assert_allclose(both, single, rtol=1e-9, atol=1e-12 * np.abs(single).max())
+
+
+def test_two_stiffness_effects_are_not_paired():
+    assert not lp.pairable("stiffness_angle", "stiffness_switching")
+    assert not lp.pairable("stiffness_drift", "stiffness_saturating")
+    assert lp.pairable("stiffness_angle", "stretch_reflex")
+    assert lp.pairable("stretch_reflex", "channel_delay")
+
+
+def _fits(adds):
+    from diagnosis.fitting import EffectFit
+    single = EffectFit(("stiffness_angle",), {"stiffness_angle": {"slope_rel": 5.0,
+                                                                 "curvature_rel": 19.0}},
+                       0.3, 10, held_out_gap=0.8, objective=0.3)
+    pair = EffectFit(("stiffness_angle", "stretch_reflex"),
+                     {"stiffness_angle": {"slope_rel": 5.0, "curvature_rel": 19.0},
+                      "stretch_reflex": {"gain": 3.0, "delay_s": 0.04, "frequency_hz": 3.0,
+                                         "rectified": False, "stretch_sign": 1.0}},
+                     0.01, 10, held_out_gap=0.05, objective=0.01)
+    pair.second_test = {"adds": adds, "single_held_out_reduction": 0.2,
+                        "pair_held_out_reduction": 0.95,
+                        "split": "stratified by the scheduling variable"}
+    return single, pair
+
+
+@pytest.mark.parametrize("adds", [True, False])
+def test_the_verdict_names_a_position_pair_only_when_its_second_adds(adds):
+    """pipeline.verdict.choose reads the pair's own held-out test (limbpairs.finish), not
+    the exoskeleton's thresholds; the sentence gives each one's held-out addition."""
+    from diagnosis.config import DiagnosisConfig
+    from diagnosis.pipeline.verdict import choose, verdict_text
+    single, pair = _fits(adds)
+    verdict, named, chosen = choose(True, [single], [pair], 1.0, DiagnosisConfig(),
+                                    best_only=True)
+    if not adds:
+        assert (verdict, named) == ("unexplained", [])
+        return
+    assert (verdict, named) == ("effect", ["stiffness_angle", "stretch_reflex"])
+    text = verdict_text(verdict, named, chosen, 1.0, None, {"amplitude_dependent": False},
+                        best=single)
+    assert text == ("effect: stiffness_angle + stretch_reflex closes 95 % of the held-out gap "
+                    "(stiffness_angle alone 20 %; stretch_reflex adds 75 points; held-out "
+                    "split: stratified by the scheduling variable).")
+
+
+@pytest.mark.slow
+def test_the_pipeline_names_the_pair_in_report_json(tmp_path):
+    """The whole diagnosis (armimp diagnose) of the written reflex + channel-delay trial:
+    report.json lists both in named_effects and the summary gives each one's addition."""
+    import trialformat as tf
+    from diagnosis.config import DiagnosisConfig
+    from diagnosis.core import diagnose
+    trial, _ = _labsim_trial("channel_delay+reflex", channel_delay_s=0.010)
+    trial.name = "cdr"
+    (tmp_path / "in").mkdir()
+    tf.write_trial(tmp_path / "in" / trial.name, trial)
+    diagnose(tmp_path / "in", tmp_path / "out", workers=1, progress=False,
+             config=DiagnosisConfig(effects=EFFECTS))
+    rep = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert rep["named_effects"] == ["stretch_reflex", "channel_delay"], rep["summary"]
+    assert "(stretch_reflex alone 99" in rep["summary"]
+    assert "channel_delay adds" in rep["summary"]
+    assert rep["pairs"][0]["second_effect_test"]["adds"] is True
