@@ -59,7 +59,9 @@ def test_fits_on_two_workers_equal_the_one_process_fits(tmp_path):
         # a re-run reads every fit (and the best fit's intervals) back from the store
         again_store = ResumeStore(tmp_path, "k")
         again = exp.fit_effects(trials, effects, config, store=again_store, runner=runner)
-    assert store.n_stored == len(effects) + 1 and again_store.n_reused == len(effects) + 1
+    # the fits, the best fit's jackknife and the pair search (diagnosis.limbpairs)
+    assert store.n_stored == len(effects) + 2 and again_store.n_reused == len(effects) + 2
+    assert [_fields(f) for f in again["pairs"]] == [_fields(f) for f in parallel["pairs"]]
     assert [_fields(f) for f in again["fits"]] == [_fields(f) for f in parallel["fits"]]
     assert phases and phases[0]["tasks"] == len(effects)  # fitted on the workers
     assert serial["significant"] and len(serial["fits"]) == len(effects)
