@@ -175,8 +175,10 @@ class PositionServo(Experiment):
                 "threshold": float(cfg.significance_sigma * g["all"].se
                                    + cfg.floor_margin * g["all"].floor),
                 "noise_floor": float(g["all"].floor),
+                "noise_floor_source": g["all"].source,
                 "measure": "limbfit: band energy of the torque residual above the noise "
-                           "floor, relative to the torque energy (diagnosis.limbfit)",
+                           "floor (noise_floor_source), relative to the torque energy "
+                           "(diagnosis.limbfit)",
                 "nominal_limb": model_of(nominal["limb"], trials[0].fs, "limbfit nominal")}
 
 
