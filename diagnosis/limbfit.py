@@ -180,12 +180,11 @@ class _Prepared:
         self.noise_tau = _white_level(rec.tau, rec.fs)
         self.noise_theta = _white_level(rec.theta, rec.fs)
 
-    def motion_inputs(self, reference: bool = False):
+    def motion_inputs(self):
         """The coherence floor's inputs (:func:`_motion_inputs`), computed once."""
-        key = "_inputs_ref" if reference else "_inputs"
-        if key not in self.__dict__:
-            self.__dict__[key] = _motion_inputs(self, reference)
-        return self.__dict__[key]
+        if "_inputs" not in self.__dict__:
+            self.__dict__["_inputs"] = _motion_inputs(self)
+        return self.__dict__["_inputs"]
 
     def lp(self, x, decimate: bool = True):
         """Zero-phase low-pass (forwards and backwards, odd extension of 0.5 s at each
@@ -382,6 +381,16 @@ class _Floor:
 #: angle's standard deviation: hysteresis that a static function of the motion misses
 #: (friction in stick between the steps of a PRBS, a play between encoder and footplate)
 PLAY_WIDTHS = (0.05, 0.3)
+#: the motion the non-linear functions are taken of is low-passed at this multiple of the
+#: analysis band (4th order, zero phase): above the band where the perturbation has power,
+#: below where the angle's sensor noise dominates its velocity
+MOTION_BAND = 2.5
+#: ... and high-passed here: a subject's voluntary torque (0-2 Hz) moves the joint against
+#: the servo; of a two-level perturbation (PRBS), theta^3 - A^2 theta is that displacement
+#: alone, which the floor would then count as gap
+MOTION_HIGHPASS_HZ = 3.0
+#: width of the smoothed sign(w), in units of the velocity's standard deviation
+SIGN_WIDTH = 0.1
 
 
 def _play(x, width):
@@ -406,24 +415,31 @@ def _nonlinear_functions(theta, omega):
     sx = float(np.std(x)) or 1.0
     sw = float(np.std(omega)) or 1.0
     cols = [(x / sx) ** 2, (x / sx) ** 3, np.abs(omega) * omega / sw ** 2,
-            np.tanh(omega / (0.1 * sw))]
+            np.tanh(omega / (SIGN_WIDTH * sw))]
     cols += [_play(x, w * sx) for w in PLAY_WIDTHS]
     return np.stack(cols, axis=1)
 
 
-def _motion_inputs(pr: _Prepared, reference: bool = False):
+def _motion_inputs(pr: _Prepared):
     """(Nd, n, q) low-passed, decimated inputs of the coherence floor for each joint's
-    channel: the angle of every joint (or the servo reference, ``reference=True``: the
-    angle channel), then the functions of the joint's own motion
+    channel (torque and, with a reference, angle): the servo reference of every joint
+    when recorded, else the measured angle, then the functions of the joint's own motion
     (:func:`_nonlinear_functions`), each centred and of unit RMS. Any residual coherent
     with these (through an LTI filter of each) is model error, not noise."""
-    th = pr.rec.theta if not reference else pr.rec.theta_ref
+    # the perturbation itself when recorded: a torque the subject adds moves the joint
+    # against the servo and is then coherent with the measured angle, never with the
+    # reference
+    th = pr.rec.theta if pr.rec.theta_ref is None else pr.rec.theta_ref
     n = pr.n
     # the functions of the *band-limited* motion: of the raw angle, they would carry its
     # sensor noise (a function's slope times the noise, most of all for sign(w) near rest),
     # which is coherent with the residual's share of that noise (-Z n_theta): noise
     # counted as gap (measured on labsim's nominal PRBS sets)
-    th_b = pr.lp(pr.rec.theta, decimate=False)
+    top = min(MOTION_BAND * pr.band, 0.45 * pr.fs)
+    sos = (signal.butter(4, [MOTION_HIGHPASS_HZ, top], btype="bandpass", fs=pr.fs,
+                         output="sos") if MOTION_HIGHPASS_HZ > 0 else
+           signal.butter(4, top, fs=pr.fs, output="sos"))
+    th_b = signal.sosfiltfilt(sos, pr.rec.theta, axis=0)
     w_b = np.gradient(th_b, 1.0 / pr.fs, axis=0)
     nl = [_nonlinear_functions(th_b[:, k], w_b[:, k]) for k in range(n)]
     m = nl[0].shape[1]
@@ -520,7 +536,7 @@ def _floors(pr: _Prepared, mask, cfg: FitConfig, limb0, part: str):
         fl = _Floor(e, s, FLOOR_WHITE)
     fa = None
     if a0 is not None:
-        fa = (_coherence_floor(a0, pr.motion_inputs(reference=True), pr, mask, cfg)
+        fa = (_coherence_floor(a0, pr.motion_inputs(), pr, mask, cfg)
               if coherence else None)
         if fa is None:
             _, s, e = _band_energy(a0, pr, mask, cfg,
