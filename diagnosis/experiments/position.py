@@ -172,8 +172,7 @@ class PositionServo(Experiment):
             out.append(fit)
         return {"fits": out, "g0_cal": g["cal"].value, "g0_held": g["held"].value,
                 "g0_all": g["all"].value, "significant": significant,
-                "threshold": float(cfg.significance_sigma * g["all"].se
-                                   + cfg.floor_margin * g["all"].floor),
+                "threshold": float(g["all"].threshold(cfg)),
                 "noise_floor": float(g["all"].floor),
                 "noise_floor_source": g["all"].source,
                 "measure": "limbfit: band energy of the torque residual above the noise "
