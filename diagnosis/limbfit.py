@@ -360,7 +360,8 @@ def _band_energy(r, pr: _Prepared, mask, cfg: FitConfig, floor_fn=None):
 # ----------------------------------------------------------------------------- floor
 #: the floor sources, in order of preference (issue 21 item 1); the report names the one used
 FLOOR_COHERENCE = ("welch non-coherent: the part of the residual not coherent, across the "
-                   "Welch segments of the analysis band, with the angle and non-linear "
+                   "Welch segments of the analysis band, with the servo reference (else the "
+                   "angle) and non-linear "
                    "functions of the motion (theta^2, theta^3, |w| w, a smoothed sign(w), "
                    "two play operators), bias-corrected for the number of segments and "
                    "inputs")
