@@ -155,6 +155,9 @@ def markdown(report) -> str:
               f"{_fmt(g['significance_threshold'])}); calibration {_fmt(g['nominal_calibration'])}, "
               f"held out {_fmt(g['nominal_held_out'])}. The {m} gap is "
               f"{g.get('measure', '').split(':', 1)[-1].strip() or 'the feature gap'}.", ""]
+    if g.get("noise_floor_source"):
+        lines += [f"Noise floor ({_fmt(g.get('noise_floor'))} of the torque energy): "
+                  f"{g['noise_floor_source']}.", ""]
     feat = g.get("features")
     if feat:
         lines += [f"Feature gap (another measure: the where stage's, from the FRF features "

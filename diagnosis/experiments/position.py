@@ -199,11 +199,12 @@ class PositionServo(Experiment):
         return {"fits": out, "pairs": [_pair_fit(p, trials[0].fs) for p in pairs],
                 "g0_cal": g["cal"].value, "g0_held": g["held"].value,
                 "g0_all": g["all"].value, "significant": significant,
-                "threshold": float(cfg.significance_sigma * g["all"].se
-                                   + cfg.floor_margin * g["all"].floor),
+                "threshold": float(g["all"].threshold(cfg)),
                 "noise_floor": float(g["all"].floor),
+                "noise_floor_source": g["all"].source,
                 "measure": "limbfit: band energy of the torque residual above the noise "
-                           "floor, relative to the torque energy (diagnosis.limbfit)",
+                           "floor (noise_floor_source), relative to the torque energy "
+                           "(diagnosis.limbfit)",
                 "nominal_limb": model_of(nominal["limb"], trials[0].fs, "limbfit nominal")}
 
 

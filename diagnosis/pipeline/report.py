@@ -115,6 +115,9 @@ def gap_block(r, chosen, reduction) -> dict:
            # calibration and held-out parts)
            "named_all": (None if r.after is None else r.after.value) if not fm else None}
     if fm:
+        # which evidence the floor came from (issue 21 item 1; limbfit.FLOOR_*)
+        top["noise_floor"] = fm.get("noise_floor")
+        top["noise_floor_source"] = fm.get("noise_floor_source")
         top["features"] = features
         top["fit_measure"] = fm
     return top

@@ -120,5 +120,8 @@ def test_pilot_stiffness_with_angle_on_sv():
     nom = lf.fit_nominal(preps, cfg)
     f = lf.fit_effect(preps, "stiffness_angle", nom, cfg, intervals=False)
     assert f.split["rule"] == "stratified by the scheduling variable"
-    assert 0.1 < f.held_out_reduction < 0.5
+    # 20 % with the floor read above the band; 56 % with the non-coherent floor (issue 21
+    # item 1: the torque not coherent with the motion left the gap, the effect closes a
+    # larger share of what is left)
+    assert 0.1 < f.held_out_reduction < 0.7
     assert f.params["slope_rel"] > 0
