@@ -36,7 +36,8 @@ def register(subparsers) -> None:
                    help="the scheduling variable the limb changes with: an extra column or "
                         "nldat variable (sv), time, angle or angle[j]; as metadata "
                         "'scheduling', which it overrides (trialformat.scheduling)")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bars (the one line per stage stays)")
     p.set_defaults(func=_diagnose)
 
     v = subparsers.add_parser("validate-diagnosis", help="make validation sets with withheld "
@@ -77,7 +78,7 @@ def _diagnose(args) -> int:
     report = diagnose(args.folder, args.out, config=config, plant=args.fmu,
                       progress=not args.quiet, workers=args.workers,
                       scheduler=args.scheduler, rk4_step=args.rk4_step,
-                      scheduling=args.scheduling)
+                      scheduling=args.scheduling, stage_lines=True)
     reports = getattr(report, "reports", None) or {None: report}
     for condition, one in reports.items():
         named = " + ".join(one.named)
