@@ -98,8 +98,13 @@ def bench_one(label: str, folder: Path, n_trials: int, data_s: float, work: Path
         if out.exists():
             import shutil
             shutil.rmtree(out)
-        cmd = [sys.executable, "-m", "orchestrator", command, str(folder), "--out", str(out),
-               "--quiet"]
+        if command == "estimate":  # no progress bars to silence; its results as JSON
+            out.mkdir(parents=True)
+            cmd = [sys.executable, "-m", "orchestrator", "estimate", str(folder), "--json",
+                   str(out / "estimate.json")]
+        else:
+            cmd = [sys.executable, "-m", "orchestrator", command, str(folder), "--out",
+                   str(out), "--quiet"]
         res = _run(cmd, work / f"{label}-{command}.log")
         row = {"set": label, "command": command, "n_trials": n_trials, "data_s": data_s,
                **res, "s_per_trial": res["wall_s"] / max(n_trials, data_s / TRIAL_S)}

@@ -331,9 +331,9 @@ def _project_offsets(pr, cols, m):
     Q, R = np.linalg.qr(basis)
     keep = np.abs(np.diag(R)) > 1e-12 * max(1.0, np.abs(R).max())
     Q, R = Q[:, keep], R[keep]
-    X = cols[m]                                             # (M, n, p)
+    X = cols[m].reshape(Q.shape[0], -1)                     # (M, n p)
     y = pr.tau_lp[m]                                        # (M, n)
-    Xr = X - np.einsum("mk,kjp->mjp", Q, np.einsum("mk,mjp->kjp", Q, X))
+    Xr = X - Q @ (Q.T @ X)
     yr = y - Q @ (Q.T @ y)
     return Xr.reshape(-1, p) / pr.norm, yr.reshape(-1) / pr.norm, Q, R
 

@@ -102,7 +102,7 @@ class PositionServo(Experiment):
         return simulate
 
     # ------------------------------------------------------------------ fits
-    def fit_effects(self, trials, effects, config, store=None):
+    def fit_effects(self, trials, effects, config, store=None, runner=None):
         """Which / how far for a position experiment: every applicable effect fitted by
         variable projection (diagnosis.limbfit: K, B, I and the effect's gain-like
         parameters linear, the others searched), calibrated on the first
@@ -113,6 +113,10 @@ class PositionServo(Experiment):
         best fit's intervals, are written to it atomically as they finish and read back
         by a re-run with the same inputs and options (the store's key), which then fits
         only what is missing and gives the same report.
+
+        ``runner`` (parallel.Runner, optional): with worker processes (or a cluster), the
+        effects are fitted on them, one task each (:func:`task_limbfit`, the same fit on
+        the same trials: the report does not depend on it); else here, in turn.
 
         Returns
         -------
@@ -133,12 +137,15 @@ class PositionServo(Experiment):
         significant = bool(g["all"].significant(cfg))
         # effects are fitted only when there is a gap to explain (as limbfit does)
         names = lf.candidates(preps, effects) if effects and significant else []
-        fits = [_resumable(store, ("limbfit", nm, repr(cfg)),
-                           lambda nm=nm: lf.fit_effect(preps, nm, nominal, cfg,
-                                                       intervals=False),
-                           lf.fit_record,
-                           lambda d: lf.fit_from_record(preps, d, nominal, cfg))
-                for nm in names]
+        if runner is not None and (runner.workers > 1 or runner._client is not None):
+            fits = _fits_on_workers(runner, store, preps, nominal, cfg, names)
+        else:
+            fits = [_resumable(store, ("limbfit", nm, repr(cfg)),
+                               lambda nm=nm: lf.fit_effect(preps, nm, nominal, cfg,
+                                                           intervals=False),
+                               lf.fit_record,
+                               lambda d: lf.fit_from_record(preps, d, nominal, cfg))
+                    for nm in names]
         fits.sort(key=lambda f: f.calibration_objective)
         from .. import varying_effects as vary
         fits = vary.prefer_simpler(fits, cfg.name_reduction)  # nesting: the simpler first
@@ -178,6 +185,47 @@ class PositionServo(Experiment):
                 "measure": "limbfit: band energy of the torque residual above the noise "
                            "floor, relative to the torque energy (diagnosis.limbfit)",
                 "nominal_limb": model_of(nominal["limb"], trials[0].fs, "limbfit nominal")}
+
+
+def task_limbfit(state, name: str, held_out_fraction: float, effects: tuple) -> dict:
+    """Worker task: :func:`limbfit.fit_effect` of ``name`` on the diagnosis's trials
+    (``state.trials``; their prepared signals and nominal fit built once per worker), as
+    :func:`limbfit.fit_record` (its JSON-able record)."""
+    from .. import limbfit as lf
+    from ..parallel import worker_cache
+    cfg = lf.FitConfig(held_out_fraction=held_out_fraction, effects=tuple(effects))
+
+    def build():
+        preps = lf.prepare([lf.PositionRecord.from_trial(t) for t in state.trials], cfg)
+        return preps, lf.fit_nominal(preps, cfg)
+    preps, nominal = worker_cache(state, ("limbfit", repr(cfg)), build)
+    return lf.fit_record(lf.fit_effect(preps, name, nominal, cfg, intervals=False))
+
+
+def _fits_on_workers(runner, store, preps, nominal, cfg, names) -> list:
+    """The fits of ``names`` (in that order): those in ``store`` read back, the others
+    run on the runner's workers (each stored as it finishes)."""
+    from .. import limbfit as lf
+    fits, todo = {}, []
+    for nm in names:
+        found = None if store is None else store.get_json(("limbfit", nm, repr(cfg)))
+        if found is not None:
+            try:
+                fits[nm] = lf.fit_from_record(preps, found, nominal, cfg)
+                store.n_reused += 1
+                continue
+            except (KeyError, ValueError, TypeError):
+                pass  # another layout: fit again
+        todo.append(nm)
+
+    def done(j, record):
+        if store is not None:
+            store.put_json(("limbfit", todo[j], repr(cfg)), record)
+    records = runner.map(task_limbfit, [(nm, cfg.held_out_fraction, cfg.effects)
+                                        for nm in todo], desc="effects", done=done)
+    for nm, d in zip(todo, records):
+        fits[nm] = lf.fit_from_record(preps, d, nominal, cfg)
+    return [fits[nm] for nm in names]
 
 
 def _resumable(store, key, compute, to_json, from_json):

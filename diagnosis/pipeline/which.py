@@ -26,7 +26,7 @@ def run(r) -> None:
     """
     own = getattr(r.experiment, "fit_effects", None)
     if own is not None:
-        out = own(r.trials, r.effects, r.config, store=r.resume)
+        out = own(r.trials, r.effects, r.config, store=r.resume, runner=r.runner)
         r.singles, r.pairs = out["fits"], []
         r.g0_cal, r.g0_held, r.significant = out["g0_cal"], out["g0_held"], out["significant"]
         r.fit_measure = {k: v for k, v in out.items() if k not in ("fits", "nominal_limb")}
