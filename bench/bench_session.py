@@ -117,6 +117,45 @@ def bench_one(label: str, folder: Path, n_trials: int, data_s: float, work: Path
     return rows
 
 
+def evaluation_costs(folder: Path, sizes: list[int], repeat: int = 2) -> list[dict]:
+    """CPU seconds of one objective evaluation of every candidate effect of the position
+    fit (diagnosis.limbfit: columns, least squares, angle residual) on the first T trials
+    of ``folder``, for each T of ``sizes`` (the grid's midpoint; median of ``repeat``).
+    Uses only what the fit had before issue 22 (``_Problem``, ``prepare``), so the same
+    function times an older checkout."""
+    import trialformat as tf
+    from diagnosis import catalogue as cat
+    from diagnosis import limbfit as lf
+    from diagnosis import varying_effects as vary
+    trials = tf.read_trials(folder)
+    cfg = lf.FitConfig()
+    rows = []
+    for T in sizes:
+        t0 = time.process_time()
+        preps = lf.prepare([lf.PositionRecord.from_trial(t) for t in trials[:T]], cfg)
+        prep_s = time.process_time() - t0
+        costs = {}
+        for name in lf.candidates(preps):
+            eff = cat.get_effect(name)
+            fixed = {k: v[0] for k, v in eff.choices.items()} if eff.choices else {}
+            prob = (vary.make_problem(lf, preps, name, fixed, cfg, 1.0) if vary.is_varying(name)
+                    else lf._Problem(preps, name, fixed, cfg))
+            x = np.full(len(prob.nl), 0.5)
+            ts = []
+            for _ in range(repeat):
+                t0 = time.process_time()
+                prob.objective(x)
+                ts.append(time.process_time() - t0)
+            costs[name] = float(np.median(ts))
+        row = {"n_trials": T, "prepare_cpu_s": prep_s, "evaluation_cpu_s": costs,
+               "sum_cpu_s": float(sum(costs.values()))}
+        rows.append(row)
+        print(f"T={T:4d}  prepare {prep_s:6.2f} s  one evaluation of each effect: "
+              f"{row['sum_cpu_s']:7.3f} s CPU  (" + ", ".join(
+                  f"{k} {v:.3f}" for k, v in costs.items()) + ")", flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", default="10,50,200,600s",
@@ -124,7 +163,24 @@ def main(argv=None) -> int:
     ap.add_argument("--work", type=Path, default=ROOT / "runs" / "session_bench")
     ap.add_argument("--commands", default="estimate,diagnose")
     ap.add_argument("--tag", default="", help="label of this run in the JSON")
+    ap.add_argument("--evaluations", action="store_true",
+                    help="time one objective evaluation of every position-fit candidate on "
+                         "the first T trials of the 200-trial set (T from --sizes), in "
+                         "this process; no commands run")
     args = ap.parse_args(argv)
+    if args.evaluations:
+        sizes = [int(s) for s in args.sizes.split(",") if s.strip().isdigit()]
+        folder = make_session(args.work.resolve() / "sets" / "n200", max(sizes))
+        rows = evaluation_costs(folder, sizes)
+        path = RESULTS / "session.json"
+        old = json.loads(path.read_text()) if path.is_file() else {}
+        old.setdefault("evaluations", []).append(
+            {"tag": args.tag, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+             "load_1min": os.getloadavg()[0], "rows": rows})
+        old["bench"] = "bench/bench_session.py"
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(old, indent=2))
+        return 0
     sizes = [s.strip() for s in args.sizes.split(",") if s.strip()]
     commands = tuple(c.strip() for c in args.commands.split(",") if c.strip())
     work = args.work.resolve()
@@ -148,7 +204,8 @@ def main(argv=None) -> int:
     runs.append({"tag": args.tag, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                  "cpus": os.cpu_count(), "load_1min": os.getloadavg()[0], "rows": rows})
     RESULTS.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"bench": "bench/bench_session.py", "runs": runs}, indent=2))
+    old.update(bench="bench/bench_session.py", runs=runs)
+    path.write_text(json.dumps(old, indent=2))
     print(f"wrote {path.relative_to(ROOT)}")
     return 0
 
