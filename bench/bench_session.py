@@ -12,6 +12,8 @@ and the wall time per trial (per 9 s of data for the long recording). Results go
     python bench/bench_session.py                    # sizes 10, 50, 200 and the 600 s one
     python bench/bench_session.py --sizes 10,50      # chosen sizes; "600s" the long one
     python bench/bench_session.py --sizes 10 --tag before   # label a run in the JSON
+    python bench/bench_session.py --evaluations --sizes 10,50,200   # CPU of one objective
+                       # evaluation of every position-fit candidate at T trials, in-process
 
 Sets are written once under ``--work`` (default ``runs/session_bench``, not in git) and reused.
 """

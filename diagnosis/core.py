@@ -48,8 +48,8 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         Show tqdm progress bars.
     stage_lines : bool, optional
         One line on stderr as each stage of the pipeline starts (``diagnose: stage 6/10
-        which (12.3 s)``) and one when it is done (default: as ``progress``; the command
-        line prints them under ``--quiet`` too).
+        which (12.3 s)``, the time since the start) and ``diagnose: done (T s)`` at the end
+        (default: as ``progress``; the command line prints them under ``--quiet`` too).
     workers : int, optional
         Local processes that run the simulations (default: one per core; 1: this
         process). The result does not depend on it.
