@@ -89,7 +89,8 @@ def _verdict(out: Path) -> dict:
     if not path.is_file():
         return {}
     js = json.loads(path.read_text())
-    return {"verdict": js.get("verdict"), "named": js.get("named"), "fitted": js.get("fitted")}
+    return {"verdict": js.get("verdict"), "named": js.get("named_effects"),
+            "fitted": js.get("fitted_parameters")}
 
 
 def bench_one(label: str, folder: Path, n_trials: int, data_s: float, work: Path,
