@@ -42,7 +42,8 @@ def register(subparsers) -> None:
                    help="set a plant parameter, or an input outside the contract (listed by "
                         "'armimp info', e.g. motor_enable=1), in every simulation; "
                         "repeatable")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bars (the one line per stage stays)")
     p.set_defaults(func=_diagnose)
 
     v = subparsers.add_parser("validate-diagnosis", help="make validation sets with withheld "
@@ -111,7 +112,7 @@ def _diagnose(args) -> int:
         report = diagnose(args.folder, args.out, config=config, plant=args.fmu,
                           progress=not args.quiet, workers=args.workers,
                           scheduler=args.scheduler, rk4_step=args.rk4_step,
-                          scheduling=args.scheduling)
+                          scheduling=args.scheduling, stage_lines=True)
     if getattr(report, "grouping", None):
         print(report.grouping)
     reports = getattr(report, "reports", None) or {None: report}

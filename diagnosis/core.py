@@ -27,7 +27,8 @@ from .report import DiagnosisReport  # noqa: F401
 
 def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(),
              plant=None, progress: bool = True, workers: int | None = None,
-             scheduler=None, rk4_step: float | None = None, scheduling: str | None = None):
+             scheduler=None, rk4_step: float | None = None, scheduling: str | None = None,
+             stage_lines: bool | None = None):
     """Diagnose the sim-to-real gap of a folder of measured trials.
 
     Parameters
@@ -45,6 +46,10 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         The plant FMU of an exoskeleton experiment (default: the reference plant).
     progress : bool
         Show tqdm progress bars.
+    stage_lines : bool, optional
+        One line on stderr as each stage of the pipeline starts (``diagnose: stage 6/10
+        which (12.3 s)``, the time since the start) and ``diagnose: done (T s)`` at the end
+        (default: as ``progress``; the command line prints them under ``--quiet`` too).
     workers : int, optional
         Local processes that run the simulations (default: one per core; 1: this
         process). The result does not depend on it.
@@ -74,6 +79,7 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     """
     from .inputs import load_trials, split_conditions
     options = dict(config=config, plant=plant, progress=progress, workers=workers,
+                   stage_lines=progress if stage_lines is None else bool(stage_lines),
                    scheduler=scheduler, rk4_step=rk4_step)
     from estimation.grouping import describe, trial_sets
     trials = load_trials(source, check=False)

@@ -54,6 +54,7 @@ milliseconds.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -181,6 +182,26 @@ def derivatives(theta: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
     return omega, alpha
 
 
+def _designed_once(design):
+    """``design(*args)`` computed once per distinct arguments (a fit asks for the same
+    filter on every trial of every evaluation; ``signal.bilinear`` is slow next to the
+    filtering itself); the cached (b, a) are read-only."""
+    @functools.lru_cache(maxsize=4096)
+    def cached(*args, **kwargs):
+        out = tuple(np.array(c, dtype=float) for c in design(*args, **kwargs))
+        for c in out:
+            c.setflags(write=False)
+        return out
+
+    @functools.wraps(design)
+    def wrapper(*args, **kwargs):
+        return cached(*(float(a) if isinstance(a, (int, float, np.floating, np.integer))
+                        and not isinstance(a, bool) else a for a in args), **kwargs)
+    wrapper.uncached = design
+    return wrapper
+
+
+@_designed_once
 def second_order_lowpass(frequency_hz: float, damping: float, fs: float, *,
                          numerator: str = "lowpass") -> tuple[np.ndarray, np.ndarray]:
     """Digital (b, a) of w^2/(s^2+2 z w s+w^2) (``numerator="lowpass"``) or of
@@ -198,6 +219,7 @@ def second_order_lowpass(frequency_hz: float, damping: float, fs: float, *,
     return signal.bilinear(num, den, fs)
 
 
+@_designed_once
 def first_order_lowpass(time_constant_s: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
     """Digital (b, a) of 1/(T s + 1) by the bilinear transform pre-warped at 1/(2 pi T)."""
     if not time_constant_s > 0:

@@ -298,7 +298,69 @@ class _Solution:
 
 
 def _solve(preps, cols_list, masks=None) -> _Solution:
-    """Least squares of the low-passed torque on shared columns + per-record offsets."""
+    """Least squares of the low-passed torque on shared columns + per-record offsets.
+
+    The offsets (a constant and a trend per record and joint) are projected out of every
+    record's rows first (Frisch-Waugh-Lovell): the shared coefficients are those of the
+    least squares of the projected torque on the projected columns, and each record's
+    offsets follow from its own rows. Same solution as one dense solve with offset
+    columns per record (:func:`_solve_dense`), at a cost linear in the records (the dense
+    design has a column pair per record and joint: its cost grows with the square of the
+    records, cubically in the normal equations)."""
+    p = cols_list[0].shape[2]
+    parts = []
+    for i, (pr, cols) in enumerate(zip(preps, cols_list)):
+        m = pr.cal if masks is None else masks[i]
+        parts.append(_project_offsets(pr, cols, m))
+    G = np.zeros((p, p))
+    b = np.zeros(p)
+    for Xr, yr, _, _ in parts:
+        G += Xr.T @ Xr
+        b += Xr.T @ yr
+    scale = np.sqrt(np.diag(G)).copy()
+    scale[scale == 0] = 1.0
+    try:  # normal equations of the column-scaled problem (p is small; fast under load)
+        coef = np.linalg.solve(G / np.outer(scale, scale), b / scale) / scale
+    except np.linalg.LinAlgError:
+        As = np.vstack([Xr for Xr, _, _, _ in parts]) / scale
+        coef, *_ = np.linalg.lstsq(As, np.concatenate([yr for _, yr, _, _ in parts]),
+                                   rcond=None)
+        coef = coef / scale
+    residual, offsets, energy = [], [], 0.0
+    for i, (pr, cols) in enumerate(zip(preps, cols_list)):
+        m = pr.cal if masks is None else masks[i]
+        _, _, Q, R = parts[i]
+        fit = pr.tau_lp - cols @ coef                      # (Nd, n)
+        qo = Q.T @ fit[m]                                   # (k, n) projections
+        c = np.linalg.lstsq(R, qo, rcond=None)[0]           # (2, n): constant, trend
+        o = c.reshape(-1)                                   # [const_j..., trend_j...]
+        r = fit - pr.offset_cols @ o
+        energy += float(np.sum(r[m] ** 2)) / pr.norm ** 2
+        residual.append(r)
+        offsets.append(o)
+    return _Solution(coef, offsets, residual, energy)
+
+
+def _project_offsets(pr, cols, m):
+    """The record's masked rows with its offsets projected out (a constant and a trend
+    per joint, the same two on every joint's rows): (Xr (M n, p), yr (M n,)) scaled by
+    1 / pr.norm, and the orthonormal basis Q (M, k) of the offsets' span on those rows with
+    R (k, 2), offset basis = Q R."""
+    p = cols.shape[2]
+    basis = np.stack([np.ones(int(m.sum())), pr.t[m] - pr.t[-1] / 2], axis=1)
+    Q, R = np.linalg.qr(basis)
+    keep = np.abs(np.diag(R)) > 1e-12 * max(1.0, np.abs(R).max())
+    Q, R = Q[:, keep], R[keep]
+    X = cols[m].reshape(Q.shape[0], -1)                     # (M, n p)
+    y = pr.tau_lp[m]                                        # (M, n)
+    Xr = X - Q @ (Q.T @ X)
+    yr = y - Q @ (Q.T @ y)
+    return Xr.reshape(-1, p) / pr.norm, yr.reshape(-1) / pr.norm, Q, R
+
+
+def _solve_dense(preps, cols_list, masks=None) -> _Solution:
+    """:func:`_solve` as one dense least squares with offset columns per record (the
+    reference its tests compare against; its cost grows with the square of the records)."""
     p = cols_list[0].shape[2]
     n_off = [2 * pr.n for pr in preps]
     rows_a, rows_y = [], []
@@ -318,7 +380,7 @@ def _solve(preps, cols_list, masks=None) -> _Solution:
     scale = np.sqrt(np.sum(A * A, axis=0))
     scale[scale == 0] = 1.0
     As = A / scale
-    try:  # normal equations of the column-scaled problem (p is small; fast under load)
+    try:
         x = np.linalg.solve(As.T @ As, As.T @ y)
     except np.linalg.LinAlgError:
         x, *_ = np.linalg.lstsq(As, y, rcond=None)
@@ -616,7 +678,12 @@ def _angle_residual(pr: _Prepared, params: dict | None):
     """Low-passed measured angle minus the servo's angle (ideal or band-limited)."""
     if pr.rec.theta_ref is None:
         return None
-    eff = {} if params is None else {"servo_bandwidth": params}
+    if params is None:  # the ideal servo's: the same for every candidate, computed once
+        if getattr(pr, "_angle_residual0", None) is None:
+            pr._angle_residual0 = pr.theta_lp - pr.lp(lm.servo_angle(pr.rec.theta_ref, pr.fs,
+                                                                      {}))
+        return pr._angle_residual0
+    eff = {"servo_bandwidth": params}
     return pr.theta_lp - pr.lp(lm.servo_angle(pr.rec.theta_ref, pr.fs, eff))
 
 

@@ -47,19 +47,49 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     _plain_warnings()
+    terminated = _sigterm_as_interrupt()
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:
-        # Ctrl-C: the workers are stopped and what finished is recorded; one line, exit 130
+        # Ctrl-C or SIGTERM (a job scheduler): the workers are stopped and what finished is
+        # recorded (a re-run resumes); one line, exit 130 (SIGINT) or 143 (SIGTERM)
         detail = f": {exc}" if str(exc) else ""
         print(f"armimp {args.command}: interrupted{detail}", file=sys.stderr)
-        return 130
+        return 128 + signal_number(terminated)
     except (ValueError, KeyError, RuntimeError, OSError) as exc:
         # escaped: a file's bytes (a binary header, escape sequences) never reach the
         # terminal raw
         from trialformat.csvtable import printable
         print(f"armimp {args.command}: error: {printable(str(exc), lines=True)}", file=sys.stderr)
         return 1
+
+
+def _sigterm_as_interrupt() -> dict:
+    """SIGTERM (a job scheduler's stop, ``kill PID``) raises KeyboardInterrupt as Ctrl-C
+    does, so the same path stops the workers and keeps what finished; a second SIGTERM
+    during that clean-up is ignored. Returns ``{"signal": signum or None}``, set when the
+    signal came."""
+    import signal
+
+    state = {"signal": None}
+
+    def handler(signum, frame):
+        state["signal"] = signum
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise KeyboardInterrupt
+
+    try:
+        signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread (main() called from a library's thread)
+        pass
+    return state
+
+
+def signal_number(state: dict) -> int:
+    """The signal that interrupted the command: SIGTERM's number, else SIGINT's (2)."""
+    import signal
+
+    return int(state["signal"] or signal.SIGINT)
 
 
 def _plain_warnings() -> None:

@@ -34,17 +34,44 @@ def run(r: DiagnosisRun) -> DiagnosisRun:
     if r.out_dir is not None:
         report.check_out_dir(r.out_dir, r.source)
     try:
-        for stage in STAGES:
+        for i, stage in enumerate(STAGES):
+            if r.stage_lines:
+                stage_line(r, i)
             if stage is nominal and r.out_dir is not None:
                 r.resume = ResumeStore(r.out_dir, run_key(r.trials, r.config, r.plant,
                                                           r.rk4_step))
             if stage is report and r.runner is not None:
                 r.runner.close()
             stage.run(r)
+        if r.stage_lines:
+            stage_line(r, len(STAGES))
+    except BaseException:
+        # Ctrl-C, SIGTERM or an error: running tasks are stopped now, not waited for (what
+        # finished is in the resume store)
+        if r.runner is not None:
+            r.runner.close(now=True)
+        raise
     finally:
         if r.runner is not None:
             r.runner.close()
     return r
 
 
-__all__ = ["DiagnosisRun", "STAGES", "run"]
+def stage_line(r: DiagnosisRun, i: int) -> None:
+    """``diagnose: stage I/N NAME (T s)`` on stderr as stage ``i`` starts (``i`` =
+    len(STAGES): ``diagnose: done (T s)``), T the time since the diagnosis started; the
+    condition's label first when the trials have one."""
+    import sys
+    import time
+    cond = r.trials[0].meta.get("condition") if r.trials else None
+    head = "diagnose: " + (f"[{cond}] " if cond is not None else "")
+    elapsed = f"({time.perf_counter() - r.t0:.1f} s)"
+    if i >= len(STAGES):
+        text = f"{head}done {elapsed}"
+    else:
+        name = STAGES[i].__name__.rsplit(".", 1)[-1]
+        text = f"{head}stage {i + 1}/{len(STAGES)} {name} {elapsed}"
+    print(text, file=sys.stderr, flush=True)
+
+
+__all__ = ["DiagnosisRun", "STAGES", "run", "stage_line"]

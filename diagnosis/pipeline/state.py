@@ -25,6 +25,7 @@ class DiagnosisRun:
     config: DiagnosisConfig = DiagnosisConfig()
     plant: object = None
     progress: bool = True
+    stage_lines: bool = False      # one stderr line per stage (pipeline.run)
     workers: int | None = None
     scheduler: object = None
     rk4_step: float | None = None
