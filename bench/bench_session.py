@@ -58,7 +58,17 @@ def make_session(folder: Path, n_trials: int) -> Path:
         spec = copy.deepcopy(base)
         spec.seed = 1000 + i
         labsim.write(labsim.simulate(spec), folder, name)
+        label_condition(folder / f"{name}.json", "ankle")
     return folder
+
+
+def label_condition(json_path: Path, condition: str) -> None:
+    """Label a written trial: recordings of one limb are one set only when labelled
+    (estimation.grouping: unlabelled recordings of one joint each stand alone)."""
+    import json
+    meta = json.loads(json_path.read_text())
+    meta["condition"] = condition
+    json_path.write_text(json.dumps(meta, indent=1))
 
 
 def make_long(folder: Path) -> Path:

@@ -75,6 +75,9 @@ def _session(folder, n, seconds=9.0):
         spec = copy.deepcopy(base)
         spec.seed = 1000 + i
         labsim.write(labsim.simulate(spec), folder, f"trial{i:03d}")
+        meta_path = folder / f"trial{i:03d}.json"  # one limb: one labelled set
+        meta_path.write_text(json.dumps({**json.loads(meta_path.read_text()),
+                                         "condition": "ankle"}))
     return folder
 
 
@@ -121,7 +124,7 @@ def test_sigterm_stops_diagnose_like_ctrl_c_exit_143_and_keeps_what_finished(ses
     assert stderr.strip().splitlines()[-1] == "armimp diagnose: interrupted", stderr
     assert "leaked" not in stderr and "Traceback" not in stderr, stderr
     # a line per stage begun, under --quiet
-    assert "diagnose: stage 1/10 read (" in stderr and "stage 4/10 nominal (" in stderr
+    assert "diagnose: [ankle] stage 1/10 read (" in stderr and "stage 4/10 nominal (" in stderr
     time.sleep(1.0)
     assert not {k for k in kids if Path(f"/proc/{k}").exists()
                 and "Z" not in Path(f"/proc/{k}/stat").read_text().rsplit(")", 1)[1][:3]}
@@ -139,5 +142,5 @@ def test_every_stage_prints_a_line_under_quiet(session, tmp_path):
     from diagnosis.pipeline import STAGES
     for i, stage in enumerate(STAGES):
         name = stage.__name__.rsplit(".", 1)[-1]
-        assert f"diagnose: stage {i + 1}/{len(STAGES)} {name} (" in stderr, stderr
-    assert "diagnose: done (" in stderr and "verdict:" in stdout
+        assert f"diagnose: [ankle] stage {i + 1}/{len(STAGES)} {name} (" in stderr, stderr
+    assert "diagnose: [ankle] done (" in stderr and "verdict:" in stdout
