@@ -657,17 +657,19 @@ def _gap(preps, residuals, angle_residuals, limb0, cfg, part: str) -> _Gap:
         mask = pr.cal if part == "cal" else pr.held if part == "held" else pr.cal | pr.held
         ref_e, _, _ = _band_energy(pr.tau_lp - pr.tau_lp[mask].mean(axis=0), pr, mask, cfg)
         f_tau, f_ang = _floors(pr, mask, cfg, limb0, part)
-        e, _, _ = _band_energy(r, pr, mask, cfg)
+        e, s_r, _ = _band_energy(r, pr, mask, cfg)
         ex += (e - f_tau.energy) / ref_e
-        se2 += (f_tau.se / ref_e) ** 2
+        # the white floor is analytic: the error is this residual's own (as before the
+        # coherence floor), not the nominal's, or a candidate's gap would be judged by it
+        se2 += ((s_r if f_tau.source == FLOOR_WHITE else f_tau.se) / ref_e) ** 2
         fl += f_tau.energy / ref_e
         sources.append(f_tau.source)
         if ra is not None:
             th_e, _, _ = _band_energy(pr.theta_lp - pr.theta_lp[mask].mean(axis=0), pr, mask,
                                       cfg)
-            e, _, _ = _band_energy(ra, pr, mask, cfg)
+            e, s_a, _ = _band_energy(ra, pr, mask, cfg)
             ex += (e - f_ang.energy) / th_e
-            se2 += (f_ang.se / th_e) ** 2
+            se2 += ((s_a if f_ang.source == FLOOR_WHITE else f_ang.se) / th_e) ** 2
             fl += f_ang.energy / th_e
             sources.append(f_ang.source)
     source = FLOOR_WHITE if FLOOR_WHITE in sources else FLOOR_COHERENCE

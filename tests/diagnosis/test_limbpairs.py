@@ -55,10 +55,14 @@ def test_a_reflex_with_a_wobbling_mass_names_both():
 
 
 def test_no_false_pair_when_the_reflex_explains_it():
-    """A reflex alone: pairs are tried (the single's residual is still significant) but no
-    second effect adds significantly on held-out data; the reflex alone is named."""
+    """A reflex alone: the reflex alone is named. With the model tolerance of the noise
+    floor (issue 21 item 1) its residual is no longer significant, so no pair is tried;
+    without it (tolerance 0) pairs are tried and no second effect adds significantly on
+    held-out data."""
     trial, _ = _labsim_trial("nominal+reflex")
     d = _diagnose(trial)
+    assert d.named == ["stretch_reflex"]
+    d = _diagnose(trial, model_tolerance=0.0)
     assert d.pairs, "the pair search did not run"
     assert d.named == ["stretch_reflex"]
     assert not any(p["second_effect_test"]["adds"] and p is d.pairs[0] for p in d.pairs)
