@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import math
 import sys
 import time
 from pathlib import Path
@@ -41,21 +40,11 @@ import labsim  # noqa: E402
 from diagnosis import limbfit as lf  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchio import write_results  # noqa: E402
+from benchio import wilson, write_results  # noqa: E402
 
 NONLINEAR = ("friction_tanh", "friction_lugre", "backlash", "contact_clipping")
 NOMINAL = ("white", "pink", "hum", "voluntary")
 FLOORS = ("coherence", "white")
-
-
-def wilson(k: int, n: int, z: float = 1.96):
-    """95 % Wilson score interval of k successes in n (Wilson 1927)."""
-    if n == 0:
-        return [0.0, 1.0]
-    p = k / n
-    c = (p + z * z / (2 * n)) / (1 + z * z / n)
-    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [max(0.0, c - h), min(1.0, c + h)]
 
 
 def band_energy(x, fs, lo=0.3, hi=30.0):

@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import sys
 import tempfile
 import time
@@ -41,6 +40,9 @@ from diagnosis import limbfit as lf  # noqa: E402
 from diagnosis import limbpairs as lp  # noqa: E402
 from diagnosis import varying_effects as vary  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from benchio import wilson  # noqa: E402
+
 #: labsim kind -> the catalogue effects that name its truth (None: stationary)
 EXPECTED = {
     "linear_drift": ("stiffness_drift", "stiffness_saturating"),
@@ -53,16 +55,6 @@ EXPECTED = {
 }
 VARYING = set(vary.EFFECTS) | {"stiffness_drift"}
 REPRESENTATIONS = ("csv17", "mat5", "float32", "sig6", "pandas")
-
-
-def wilson(k: int, n: int, z: float = 1.96):
-    """95 % Wilson score interval of k successes in n (Wilson 1927)."""
-    if n == 0:
-        return [0.0, 1.0]
-    p = k / n
-    c = (p + z * z / (2 * n)) / (1 + z * z / n)
-    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [max(0.0, c - h), min(1.0, c + h)]
 
 
 def one(kind: str, seed: int, folder: Path, representation: str) -> dict:

@@ -8,6 +8,7 @@ Standard library only: a bench must not change what it measures by importing the
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -35,3 +36,13 @@ def write_results(name: str, doc, *, indent: int = 1) -> Path:
         raise
     print(f"wrote bench/results/{out.name}")
     return out
+
+
+def wilson(k: int, n: int, z: float = 1.96):
+    """95 % Wilson score interval of k successes in n (Wilson 1927)."""
+    if n == 0:
+        return [0.0, 1.0]
+    p = k / n
+    c = (p + z * z / (2 * n)) / (1 + z * z / n)
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return [max(0.0, c - h), min(1.0, c + h)]
