@@ -802,13 +802,21 @@ class _Problem:
 
     def _refine(self, x0, maxiter=None):
         step = 0.03 if maxiter is None else 0.01  # of the search span
-        simplex = [x0] + [x0 + np.eye(len(x0))[i] * (step if x0[i] < 0.5 else -step)
-                          for i in range(len(x0))]
-        res = optimize.minimize(self.objective, x0, method="Nelder-Mead",
-                                options={"initial_simplex": np.array(simplex),
-                                         "xatol": 2e-5, "fatol": 1e-8,
-                                         "maxiter": maxiter or 40 * len(x0)})
-        return res.x
+        return nelder_mead(self.objective, x0, step=step, maxiter=maxiter)
+
+
+def nelder_mead(fn, x0, *, step: float = 0.03, maxiter: int | None = None) -> np.ndarray:
+    """Nelder-Mead refinement of ``fn`` from ``x0`` (search coordinates in [0, 1]): an
+    initial simplex of ``step`` along each axis, inward from the nearer bound; at most
+    ``maxiter`` (default 40 per coordinate) iterations."""
+    x0 = np.asarray(x0, float)
+    simplex = [x0] + [x0 + np.eye(len(x0))[i] * (step if x0[i] < 0.5 else -step)
+                      for i in range(len(x0))]
+    res = optimize.minimize(fn, x0, method="Nelder-Mead",
+                            options={"initial_simplex": np.array(simplex),
+                                     "xatol": 2e-5, "fatol": 1e-8,
+                                     "maxiter": maxiter or 40 * len(x0)})
+    return res.x
 
 
 # ----------------------------------------------------------------------------- results

@@ -38,7 +38,6 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import optimize
 from scipy import signal
 
 from . import catalogue as cat
@@ -243,14 +242,8 @@ class PairProblem:
 
     @staticmethod
     def _refine(fn, x0, step=0.03, maxiter=None):
-        x0 = np.asarray(x0, float)
-        simplex = [x0] + [x0 + np.eye(len(x0))[i] * (step if x0[i] < 0.5 else -step)
-                          for i in range(len(x0))]
-        res = optimize.minimize(fn, x0, method="Nelder-Mead",
-                                options={"initial_simplex": np.array(simplex),
-                                         "xatol": 2e-5, "fatol": 1e-8,
-                                         "maxiter": maxiter or 40 * len(x0)})
-        return res.x
+        from .limbfit import nelder_mead
+        return nelder_mead(fn, x0, step=step, maxiter=maxiter)
 
 
 # ----------------------------------------------------------------------------- results
