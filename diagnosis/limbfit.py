@@ -526,6 +526,47 @@ def _motion_inputs(pr: _Prepared):
     return pr.lp(full.reshape(pr.N, -1)).reshape(pr.Nd, n, n + m)
 
 
+#: window of the local-impedance input of the coherence floor [s]: short against the
+#: time a limb takes to change state (a co-contraction level held 3-10 s, a drift, a
+#: movement of 10-20 s period), long against the parameters it fits (3 n per joint)
+LOCAL_WINDOW_S = 1.0
+
+
+def _local_input(pr: _Prepared, r0):
+    """(Nd, n, 1) the local-impedance input of the coherence floor, and the share of a
+    white residual's in-band energy its fit takes.
+
+    Per window of LOCAL_WINDOW_S and joint j, the nominal residual r0[:, j] is regressed
+    on that joint's low-passed K, B, I columns (and a constant); the input is the fitted
+    torque (the constant's share left out). A limb whose K, B or I changes in time or
+    with the state leaves in r0 the torque dK(t) theta + dB(t) w + dI(t) a, which no LTI
+    filter of a stationary input reproduces, so the floor's other inputs leave it in the
+    floor: the effect would set its own threshold (a stiffness switching 1 <-> 2x gave a
+    floor of 12 % of the torque energy, its gap hidden). Of a stationary limb the windows
+    fit noise alone: p of the window's in-band degrees of freedom, corrected for."""
+    n, Nd = pr.n, pr.Nd
+    w = max(8, int(round(LOCAL_WINDOW_S * pr.fs_d)))
+    u = np.zeros((Nd, n, 1))
+    p = 0
+    for j in range(n):
+        cols = pr.base[:, j, :]
+        cols = cols[:, np.any(cols != 0.0, axis=0)]
+        p = cols.shape[1] + 1
+        for a in range(0, Nd, w):
+            b = Nd if Nd - a < 2 * w else a + w   # the last window takes the remainder
+            A = np.column_stack([cols[a:b], np.ones(b - a)])
+            c = np.linalg.lstsq(A, r0[a:b, j], rcond=None)[0]
+            u[a:b, j, 0] = cols[a:b] @ c[:-1]
+            if b == Nd:
+                break
+    u = u - u.mean(axis=0)
+    sd = u.std(axis=0)
+    u = u / np.where(sd > 0, sd, 1.0)
+    in_band = max(1e-9, 2.0 * (pr.band - 0.0) / pr.fs_d)  # band-limited columns
+    share = min(0.5, p / (w * in_band))
+    return u, share
+
+
 #: Hann segments overlapping by half: the squared correlation of neighbouring segments'
 #: periodograms of white noise is 1/9, so K segments count as K / (1 + 2/9) independent ones
 _OVERLAP_FACTOR = 1.0 + 2.0 / 9.0
@@ -543,7 +584,7 @@ def _segments_fft(x, nper):
     return X, 1.0 / np.sum(win ** 2)
 
 
-def _coherence_floor(r, X, pr: _Prepared, mask, cfg: FitConfig):
+def _coherence_floor(r, X, pr: _Prepared, mask, cfg: FitConfig, fitted_share=0.0):
     """The non-coherent floor of residual r (Nd, n) given inputs X (Nd, n, q) on ``mask``
     rows, or None when there are too few Welch segments for q inputs.
 
@@ -551,7 +592,9 @@ def _coherence_floor(r, X, pr: _Prepared, mask, cfg: FitConfig):
     S_rr (1 - gamma^2), divided by (1 - q / n) (n the equivalent number of independent
     segments: the conditioned spectrum of noise alone keeps n - q of n degrees of
     freedom), summed over the analysis band. Under noise alone gamma^2 is Beta(q, n - q):
-    that variance, with 1.5 for the correlation of neighbouring Hann bins, gives ``se``."""
+    that variance, with 1.5 for the correlation of neighbouring Hann bins, gives ``se``.
+    ``fitted_share``: the share of a white residual's in-band energy that inputs fitted to
+    r itself take (:func:`_local_input`); the floor is divided by (1 - it) too."""
     x, u = r[mask], X[mask]
     nper = int(min(x.shape[0], round(cfg.welch_s * pr.fs_d)))
     if x.shape[0] < nper or nper < 8:
@@ -580,7 +623,7 @@ def _coherence_floor(r, X, pr: _Prepared, mask, cfg: FitConfig):
             coh[b] = min(1.0, max(0.0, float(np.real(np.vdot(s_ur[b], h))) /
                                   s_rr[b])) if s_rr[b] > 0 else 0.0
         p = 2.0 * scale / pr.fs_d * s_rr               # one-sided density, as welch
-        noise = p * (1.0 - coh) / (1.0 - beta)
+        noise = p * (1.0 - coh) / ((1.0 - beta) * (1.0 - fitted_share))
         energy += float(np.sum(noise)) * df
         var += float(np.sum(noise ** 2)) * var_g / (1.0 - beta) ** 2
     return _Floor(energy, 1.5 * df * math.sqrt(var), FLOOR_COHERENCE)
@@ -603,7 +646,11 @@ def _floors(pr: _Prepared, mask, cfg: FitConfig, limb0, part: str):
         raise ValueError(f"FitConfig.noise_floor = {cfg.noise_floor!r}: 'coherence' or 'white'")
     coherence = cfg.noise_floor == "coherence"
     r0, a0 = pr.nominal_residual
-    fl = _coherence_floor(r0, pr.motion_inputs(), pr, mask, cfg) if coherence else None
+    fl = None
+    if coherence:
+        u, share = _local_input(pr, r0)
+        X = np.concatenate([pr.motion_inputs(), u], axis=2)
+        fl = _coherence_floor(r0, X, pr, mask, cfg, share)
     if fl is None:
         _, s, e = _band_energy(r0, pr, mask, cfg, _torque_floor(pr, limb0))
         fl = _Floor(e, s, FLOOR_WHITE)
