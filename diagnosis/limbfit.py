@@ -537,7 +537,8 @@ def _local_input(pr: _Prepared, r0):
     white residual's in-band energy its fit takes.
 
     Per window of LOCAL_WINDOW_S and joint j, the nominal residual r0[:, j] is regressed
-    on that joint's low-passed K, B, I columns (and a constant); the input is the fitted
+    on that joint's K, B, I columns, band-passed from MOTION_HIGHPASS_HZ to the analysis
+    band (and a constant); the input is the fitted
     torque (the constant's share left out). A limb whose K, B or I changes in time or
     with the state leaves in r0 the torque dK(t) theta + dB(t) w + dI(t) a, which no LTI
     filter of a stationary input reproduces, so the floor's other inputs leave it in the
@@ -548,8 +549,14 @@ def _local_input(pr: _Prepared, r0):
     w = max(8, int(round(LOCAL_WINDOW_S * pr.fs_d)))
     u = np.zeros((Nd, n, 1))
     p = 0
+    # the columns high-passed as the floor's motion functions are: a voluntary torque
+    # (0-2 Hz) moves the joint against the servo, which a window's fit on the raw angle
+    # takes for a changing stiffness (labsim's voluntary sets: the floor 12 % lower)
+    lo = min(MOTION_HIGHPASS_HZ, 0.5 * pr.band)
+    hp = signal.butter(2, lo, btype="highpass", fs=pr.fs_d, output="sos")
+    base = signal.sosfiltfilt(hp, pr.base, axis=0)
     for j in range(n):
-        cols = pr.base[:, j, :]
+        cols = base[:, j, :]
         cols = cols[:, np.any(cols != 0.0, axis=0)]
         p = cols.shape[1] + 1
         for a in range(0, Nd, w):
@@ -562,7 +569,7 @@ def _local_input(pr: _Prepared, r0):
     u = u - u.mean(axis=0)
     sd = u.std(axis=0)
     u = u / np.where(sd > 0, sd, 1.0)
-    in_band = max(1e-9, 2.0 * (pr.band - 0.0) / pr.fs_d)  # band-limited columns
+    in_band = max(1e-9, 2.0 * (pr.band - lo) / pr.fs_d)  # band-passed columns
     share = min(0.5, p / (w * in_band))
     return u, share
 
