@@ -136,11 +136,10 @@ def pair_columns(pr, effects: dict):
     for k in eff:
         if not vary.is_varying(k):
             continue
-        phi, quasi = vary.basis(pr, k, eff[k])
-        phi_d = phi[::pr.D][:pr.Nd]
+        # the basis is already on the decimated samples (vary.basis): not decimated again
+        phi_d, q = vary.basis(pr, k, eff[k])
         extra = [cols[:, :, :2 * nn] * phi_d[:, m, None, None] for m in range(phi_d.shape[1])]
-        if quasi is not None:
-            q = quasi[::pr.D][:pr.Nd]
+        if q is not None:
             for m in range(q.shape[1]):
                 c = np.zeros((pr.Nd, n, n))
                 for j in range(n):

@@ -81,6 +81,31 @@ def test_pair_columns_equal_the_single_columns_with_the_partner_off():
     np.testing.assert_allclose(both, single, rtol=1e-9, atol=1e-12 * np.abs(single).max())
 
 
+@pytest.mark.parametrize("name,params", [
+    ("stiffness_saturating", {"time_constant_s": 3.0}),
+    ("stiffness_modulated", {"period_s": 5.0}),
+])
+def test_pair_columns_of_a_varying_effect_are_its_own_columns(name, params):
+    """A varying effect's basis is on the decimated samples already: the pair's columns
+    (varying + reflex) hold the varying effect's own columns, not a decimated-twice basis
+    (which failed every such pair)."""
+    from diagnosis import varying_effects as vary
+    trial, _ = _labsim_trial("nominal+reflex", seconds=8.0)
+    cfg = lf.FitConfig(n_jackknife=0)
+    pr = lf.prepare([lf.PositionRecord.from_trial(trial)], cfg)[0]
+    own = vary.columns(pr, name, params)
+    alone, layout = lp.pair_columns(pr, {name: params})
+    np.testing.assert_allclose(alone, own, rtol=1e-9, atol=1e-12 * np.abs(own).max())
+    r = {"delay_s": 0.04, "frequency_hz": 2.0, "rectified": True, "stretch_sign": 1.0}
+    both, layout = lp.pair_columns(pr, {name: params, "stretch_reflex": r})
+    nn = pr.n * pr.n
+    np.testing.assert_allclose(both[:, :, layout[name]], own[:, :, 3 * nn:], rtol=1e-9,
+                               atol=1e-12 * np.abs(own).max())
+    np.testing.assert_allclose(both[:, :, layout["stretch_reflex"]],
+                               pr.columns("stretch_reflex", r)[:, :, 3 * nn:], rtol=1e-9,
+                               atol=1e-12 * np.abs(own).max())
+
+
 def test_two_stiffness_effects_are_not_paired():
     assert not lp.pairable("stiffness_angle", "stiffness_switching")
     assert not lp.pairable("stiffness_drift", "stiffness_saturating")
