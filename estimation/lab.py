@@ -33,6 +33,7 @@ from .accuracy import (WEIGHTINGS, corrected_impedance, fit_impedance, left_limi
 from .errors import EstimationError
 from .estimator import (METHODS, band_mask, default_method, estimate_impedance,
                         perturbation_of)
+from .numbers import distinct
 
 UNITS = {"M": "kg m^2", "B": "N m s/rad", "K": "N m/rad"}
 NAMES = {"M": "inertia", "B": "damping", "K": "stiffness"}
@@ -739,10 +740,12 @@ def sensitivity_warnings(result) -> list[str]:
             value, ci = getattr(result.fit, p)[i, i], getattr(result.fit, f"{p}_ci")[i, i]
             moved = [v for v in s["variants"]
                      if abs(v[p][i][i] - value) > max(ci, v[f"{p}_ci"][i][i])]
+            # digits enough that the values that differ print differently (not 1.2...1.2)
+            text = distinct([value, lo, hi] + [v[p][i][i] for v in moved[:3]])
             which = "; ".join(f"{v['band_hz'][0]:.3g}-{v['band_hz'][1]:.3g} Hz "
-                              f"{v['weighting']}: {v[p][i][i]:.4g}" for v in moved[:3])
-            out.append(f"band-sensitive: {symbol_of(p, n)}{_e(i, i, n)} = {value:.4g} +- "
-                       f"{ci:.2g} {UNITS[p]} moves over {lo:.4g}...{hi:.4g} with the band "
+                              f"{v['weighting']}: {t}" for v, t in zip(moved[:3], text[3:]))
+            out.append(f"band-sensitive: {symbol_of(p, n)}{_e(i, i, n)} = {text[0]} +- "
+                       f"{ci:.2g} {UNITS[p]} moves over {text[1]}...{text[2]} with the band "
                        f"and weighting ({which}), beyond the statistical interval: the "
                        f"second-order model does not hold equally across the band; report "
                        f"the range")

@@ -49,3 +49,25 @@ def test_the_example_ankle_in_radians_is_not_told_degrees(tmp_path, capsys):
     main(["estimate", str(tmp_path), "--segments", "0"])
     out = capsys.readouterr().out
     assert "relaxed" in out and "angles in degrees" not in out, out
+
+
+def test_band_sensitive_values_print_with_digits_enough_to_differ():
+    from types import SimpleNamespace
+    from estimation.lab import sensitivity_warnings
+    one = np.ones((1, 1))
+    fit = SimpleNamespace(K=80 * one, B=1.2 * one, M=0.012 * one, K_ci=0.5 * one,
+                          B_ci=1e-5 * one, M_ci=1e-4 * one)
+    variants = [{"band_hz": [1.0, 30.0], "weighting": "smoothed",
+                 "K": [[80.2]], "B": [[1.20004]], "M": [[0.012]],
+                 "K_ci": [[0.5]], "B_ci": [[1e-5]], "M_ci": [[1e-4]]}]
+    sens = {"variants": variants,
+            "range": {"K": [[[80.0]], [[80.2]]], "B": [[[1.2]], [[1.20004]]],
+                      "M": [[[0.012]], [[0.012]]]},
+            "exceeds": {"K": [[False]], "B": [[True]], "M": [[False]]}}
+    out = sensitivity_warnings(SimpleNamespace(sensitivity=sens, n_dof=1, fit=fit))
+    assert len(out) == 1, out
+    assert "moves over 1.2...1.20004 with the band" in out[0], out
+    assert "1-30 Hz smoothed: 1.20004" in out[0], out
+    from estimation.numbers import distinct
+    assert distinct([1.23456, 1.23456]) == ["1.235", "1.235"]  # equal values stay short
+    assert distinct([80.0, 80.2]) == ["80", "80.2"]
