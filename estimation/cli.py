@@ -21,6 +21,7 @@ from trialformat.cliargs import MAX_FFT, number
 # Only names here: numpy, scipy and the estimation modules load in the handlers
 # (``estimate`` never loads matplotlib), so that --help prints at once.
 from .names import METHODS, PAPER, RECOMMENDED, WEIGHTINGS
+from .numbers import distinct
 
 TRUTHS = ("none", "table1", "reference-3dof")
 #: --reflex-* search ranges: option, ReflexOptions field, unit, largest value, default
@@ -468,7 +469,8 @@ def describe(r, torque_sign=None) -> str:
             e = f"Z{i + 1}{k + 1}" if r.n_dof > 1 else "Z"
             rng = r.sensitivity["range"]
             lines.append(f"  {e} over {nv} band/weighting choices: " + "  ".join(
-                f"{symbol(p, r.n_dof)} {rng[p][0][i][k]:.4g}...{rng[p][1][i][k]:.4g}"
+                f"{symbol(p, r.n_dof)} " + "...".join(distinct([rng[p][0][i][k],
+                                                                rng[p][1][i][k]]))
                 for p in "KBM"))
     lines += [f"  warning: {w}" for w in r.warnings]
     lines += [x.describe() for x in (r.reflex or [])]

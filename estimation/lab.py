@@ -33,6 +33,7 @@ from .accuracy import (WEIGHTINGS, corrected_impedance, fit_impedance, left_limi
 from .errors import EstimationError
 from .estimator import (METHODS, band_mask, default_method, estimate_impedance,
                         perturbation_of)
+from .numbers import distinct
 
 UNITS = {"M": "kg m^2", "B": "N m s/rad", "K": "N m/rad"}
 NAMES = {"M": "inertia", "B": "damping", "K": "stiffness"}
@@ -739,10 +740,12 @@ def sensitivity_warnings(result) -> list[str]:
             value, ci = getattr(result.fit, p)[i, i], getattr(result.fit, f"{p}_ci")[i, i]
             moved = [v for v in s["variants"]
                      if abs(v[p][i][i] - value) > max(ci, v[f"{p}_ci"][i][i])]
+            # digits enough that the values that differ print differently (not 1.2...1.2)
+            text = distinct([value, lo, hi] + [v[p][i][i] for v in moved[:3]])
             which = "; ".join(f"{v['band_hz'][0]:.3g}-{v['band_hz'][1]:.3g} Hz "
-                              f"{v['weighting']}: {v[p][i][i]:.4g}" for v in moved[:3])
-            out.append(f"band-sensitive: {symbol_of(p, n)}{_e(i, i, n)} = {value:.4g} +- "
-                       f"{ci:.2g} {UNITS[p]} moves over {lo:.4g}...{hi:.4g} with the band "
+                              f"{v['weighting']}: {t}" for v, t in zip(moved[:3], text[3:]))
+            out.append(f"band-sensitive: {symbol_of(p, n)}{_e(i, i, n)} = {text[0]} +- "
+                       f"{ci:.2g} {UNITS[p]} moves over {text[1]}...{text[2]} with the band "
                        f"and weighting ({which}), beyond the statistical interval: the "
                        f"second-order model does not hold equally across the band; report "
                        f"the range")
@@ -929,6 +932,12 @@ ABSOLUTE_SIGMAS, ABSOLUTE_MIN_RAD = 3.0, 0.02
 #: read as degrees. The rule of the diagnosis' conventions check, on the same constants
 #: (trialformat.reference).
 DEGREES_LIMIT_RAD, DEGREES_PLAUSIBLE_RAD = ANGLE_LIMIT_RAD, PLAUSIBLE_DEVIATION_RAD
+#: Plausible impedance of a human ankle, elbow or wrist: K [N m/rad] and I [kg m^2]. A fit
+#: with K and I both below these ranges while both times 180/pi (57.3) fall inside them
+#: reads as an angle stored in degrees whose perturbation is too small (< 2 rad read as
+#: rad) for the deviation rule above. (A relaxed wrist's K may be below 5; its I, the
+#: hand's 3e-3 or more, is not below 1e-3.)
+K_PLAUSIBLE, I_PLAUSIBLE = (5.0, 2000.0), (1e-3, 1.0)
 
 
 def convention_warnings(result, trials) -> list[str]:
@@ -944,8 +953,11 @@ def convention_warnings(result, trials) -> list[str]:
       deviations and ABSOLUTE_MIN_RAD while the file declares deviations. Key: ``angles``.
     - ``angles in degrees?``: a joint's largest deviation from its mean angle beyond
       DEGREES_LIMIT_RAD (2 rad) while the same number read as degrees is below
-      DEGREES_PLAUSIBLE_RAD (0.5 rad). No key declares degrees: theta must be stored in
-      rad (log-format.md); K, B, I scale by 180/pi once it is.
+      DEGREES_PLAUSIBLE_RAD (0.5 rad). Units are declared by the metadata key ``units``
+      or a header ``theta[1] (deg)`` (log-format.md); K, B, I scale by 180/pi once it is.
+    - ``angles in degrees? ... K implausibly small``: a small perturbation in degrees (no
+      deviation beyond 2 rad): K and I both below K_PLAUSIBLE, I_PLAUSIBLE while both
+      times 180/pi lie inside them, the file stating no unit for theta.
     """
     out, n = [], result.n_dof
     fit = result.fit
@@ -986,11 +998,34 @@ def convention_warnings(result, trials) -> list[str]:
                            f"{dev[j]:.4g} rad from its mean (std {t.theta[:, j].std():.3g} "
                            f"rad), beyond the {DEGREES_LIMIT_RAD:g} rad a joint's "
                            f"perturbation can move it; read as degrees it is "
-                           f"{np.radians(dev[j]):.3g} rad. theta must be in rad "
-                           f"(log-format.md; no metadata key declares degrees): store "
+                           f"{np.radians(dev[j]):.3g} rad. If theta is in degrees, "
+                           f"declare it (metadata \"units\": {{\"theta\": \"deg\"}} or the "
+                           f"CSV header theta[{j + 1}] (deg), log-format.md) or store "
                            f"theta[{j + 1}] * pi/180; K, B, {symbol_of('M', n)} are then "
                            f"180/pi = 57.3 times these (K{_e(j, j, n)} about {k:.4g} "
                            f"{UNITS['K']})")
+    c = 180 / np.pi
+    for j in range(n):
+        k, inertia = fit.K[j, j], fit.M[j, j]
+        stated = [t.name for t in trials if f"theta[{j + 1}]" in (t.meta.get("units_read") or {})]
+        if (any(jj == j for _, jj in degrees) or stated or not 0 < k < K_PLAUSIBLE[0]
+                or not 0 < inertia < I_PLAUSIBLE[0]
+                or not K_PLAUSIBLE[0] <= k * c <= K_PLAUSIBLE[1]
+                or not I_PLAUSIBLE[0] <= inertia * c <= I_PLAUSIBLE[1]):
+            continue
+        names = ", ".join(t.name for t in trials)
+        sd = max(float(t.theta[:, j].std()) for t in trials if t.theta is not None)
+        out.append(f"angles in degrees? {names}: theta[{j + 1}] gives K{_e(j, j, n)} = "
+                   f"{k:.4g} {UNITS['K']} and {symbol_of('M', n)} = {inertia:.3g} {UNITS['M']}, "
+                   f"both implausibly small for a human joint (plausible "
+                   f"K {K_PLAUSIBLE[0]:g}-{K_PLAUSIBLE[1]:g} {UNITS['K']}, "
+                   f"{symbol_of('M', n)} {I_PLAUSIBLE[0]:g}-{I_PLAUSIBLE[1]:g} "
+                   f"{UNITS['M']}); times 180/pi = 57.3 both are plausible "
+                   f"(K about {k * c:.4g} {UNITS['K']}, {symbol_of('M', n)} about "
+                   f"{inertia * c:.3g} {UNITS['M']}), as when theta[{j + 1}] (std {sd:.3g}) "
+                   f"is stored in degrees. If it is, declare it: metadata \"units\": "
+                   f"{{\"theta\": \"deg\"}} or the CSV header theta[{j + 1}] (deg) "
+                   f"(log-format.md)")
     for t in trials:
         if t.meta.get("angles") == "absolute" or t.theta is None:
             continue

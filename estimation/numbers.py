@@ -46,3 +46,16 @@ def plus_minus(value: float, ci: float, unit: str = "", sig: int = 2) -> str:
     v, c = round_pair(value, ci, sig)
     text = f"{v} ± {c}" if c else v
     return f"{text} {unit}" if unit else text
+
+
+def distinct(values, sig: int = 4, max_sig: int = 12) -> list[str]:
+    """``values`` with ``sig`` significant digits (``:g``), or more, up to ``max_sig``,
+    until values that differ print differently (1.2 and 1.20004: "1.2" and "1.20004",
+    not "1.2" twice)."""
+    values = [float(v) for v in values]
+    for s in range(sig, max_sig + 1):
+        texts = [f"{v:.{s}g}" for v in values]
+        if all(texts[a] != texts[b] for a in range(len(values))
+               for b in range(a) if values[a] != values[b]):
+            return texts
+    return texts
