@@ -65,9 +65,13 @@ def _start(args, tmp_path):
     systmp = tmp_path / "systmp"
     systmp.mkdir(exist_ok=True)
     env = {**os.environ, "TMPDIR": str(systmp), "PYTHONPATH": str(ROOT)}
+    # SIGINT back to its default: a shell starting the tests in the background (`... &`
+    # without job control) makes its children ignore it, and Python then never raises
+    # KeyboardInterrupt (the command under test would run to its end)
     proc = subprocess.Popen([sys.executable, "-m", "orchestrator", *args], cwd=ROOT, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     return proc, systmp
 
 
