@@ -86,6 +86,10 @@ class FitConfig:
     name_reduction : held-out reduction an effect needs to be named.
     grid : grid points per nonlinear parameter; refine_starts: grid points refined.
     pairs : try a second effect on top of the best single (diagnosis.limbpairs).
+    time_gate : a change found by the shared time-variation test (estimation.timevarying,
+        the one ``armimp estimate`` warns from) on any record and joint makes the gap
+        significant whatever the whole-record gap says: a gap confined to part of a
+        record is not averaged away, and the two commands never contradict each other.
     """
 
     band_hz: float = 30.0
@@ -104,6 +108,7 @@ class FitConfig:
     pairs: bool = True
     noise_floor: str = "coherence"
     model_tolerance: float = 1e-4
+    time_gate: bool = True
 
 
 @dataclass
@@ -940,6 +945,41 @@ class PositionDiagnosis:
     pairs: list = field(default_factory=list)
 
 
+def changes_in_time(records) -> list:
+    """Names (``trial`` or ``trial[j]``) of the records and joints in which the shared
+    time-variation test (estimation.timevarying.time_variation: Bonferroni over
+    parameters, intervals and splits, family-wise false-alarm rate ALPHA) finds a change
+    of K, B or I. A record too short for the test is skipped (it cannot find one).
+
+    records : list of PositionRecord (or trialformat.Trial of position perturbations).
+    """
+    from estimation.timevarying import time_variation
+    found = []
+    for i, rec in enumerate(records):
+        rec = rec if isinstance(rec, PositionRecord) else PositionRecord.from_trial(rec)
+        label = rec.name or f"record {i + 1}"
+        for j in range(rec.n_dof):
+            name = f"{label}[{j + 1}]" if rec.n_dof > 1 else label
+            try:
+                tv = time_variation(rec.theta[:, j], rec.tau[:, j], rec.fs, name=name)
+            except ValueError:
+                continue
+            if tv.time_varying:
+                found.append(name)
+    return found
+
+
+def gap_is_significant(records, gap_all, cfg: FitConfig) -> tuple[bool, list]:
+    """(significant, changing) for the fits' gate: the whole-record gap ``gap_all`` (a
+    ``_Gap``) above its threshold, or, with ``cfg.time_gate``, a change found in time on
+    any record (:func:`changes_in_time`; only tested when the gap alone is not
+    significant, so that its cost is paid where it decides)."""
+    if gap_all.significant(cfg):
+        return True, []
+    changing = changes_in_time(records) if cfg.time_gate else []
+    return bool(changing), changing
+
+
 def _norms(preps):
     for pr in preps:
         pr.norm = float(np.std(pr.tau_lp[pr.cal])) or 1.0
@@ -1168,7 +1208,7 @@ def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosi
     nominal = fit_nominal(preps, cfg)
     g = nominal["gaps"]
     threshold = g["all"].threshold(cfg)
-    significant = g["all"].significant(cfg)
+    significant, changing = gap_is_significant(records, g["all"], cfg)
     fits = []
     if significant:
         fits = [fit_effect(preps, nm, nominal, cfg, intervals=False)
@@ -1203,6 +1243,7 @@ def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosi
              "nominal_held_out": g["held"].value, "nominal_excess": g["all"].excess,
              "significance_threshold": threshold, "noise_floor": g["all"].floor,
              "noise_floor_source": g["all"].source,
+             "changing_in_time": changing,
              "named_held_out_reduction": (pair.held_out_reduction if pair is not None
                                           else best.held_out_reduction if best else None)},
         elapsed_s=time.perf_counter() - t0,

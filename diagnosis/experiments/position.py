@@ -138,7 +138,9 @@ class PositionServo(Experiment):
         preps = lf.prepare(records, cfg)
         nominal = lf.fit_nominal(preps, cfg)
         g = nominal["gaps"]
-        significant = bool(g["all"].significant(cfg))
+        # the shared time-variation test gates the fits too: a change found in time makes
+        # the gap significant (limbfit.gap_is_significant), as in limbfit.diagnose_position
+        significant, changing = lf.gap_is_significant(records, g["all"], cfg)
         # effects are fitted only when there is a gap to explain (as limbfit does)
         names = lf.candidates(preps, effects) if effects and significant else []
         if _parallel(runner, trials, names):
@@ -202,6 +204,7 @@ class PositionServo(Experiment):
                 "threshold": float(g["all"].threshold(cfg)),
                 "noise_floor": float(g["all"].floor),
                 "noise_floor_source": g["all"].source,
+                "changing_in_time": changing,
                 "measure": "limbfit: band energy of the torque residual above the noise "
                            "floor (noise_floor_source), relative to the torque energy "
                            "(diagnosis.limbfit)",

@@ -118,6 +118,8 @@ def gap_block(r, chosen, reduction) -> dict:
         # which evidence the floor came from (issue 21 item 1; limbfit.FLOOR_*)
         top["noise_floor"] = fm.get("noise_floor")
         top["noise_floor_source"] = fm.get("noise_floor_source")
+        # the records the shared time-variation test made significant (limbfit.time_gate)
+        top["changing_in_time"] = fm.get("changing_in_time", [])
         top["features"] = features
         top["fit_measure"] = fm
     return top
