@@ -133,9 +133,10 @@ def alternatives_lines(report, top: int = 6) -> list:
     if not rows:
         return []
     named = " + ".join(report.named)
-    out = [f"Alternatives to {named}, each on its held-out split ({rows[0]['split']}; "
-           f"{named}: {_pct(rows[0]['named_held_out_reduction'])} %); within 5 points of "
-           f"it, or more, is indistinguishable here:", "",
+    out = [f"Alternatives to {named}, each judged on the held-out split of {named} "
+           f"({rows[0]['split']}), where {named} closes "
+           f"{_pct(rows[0]['named_held_out_reduction'])} % of the gap; an alternative "
+           f"within 5 points of it, or above, is indistinguishable here:", "",
            "| alternative | held-out reduction, same split | on its own split | "
            "indistinguishable | what would separate them |", "|---|---|---|---|---|"]
     for r in rows[:top]:

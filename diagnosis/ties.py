@@ -201,6 +201,11 @@ def _pair_advice(a, b, params, band_hz):  # noqa: C901 - one rule per pair of fa
             return (f"a recorded motor command or current beside the torque sensor, or a "
                     f"perturbation band above the lag's corner{where}: one lag acts on the "
                     f"applied torque, the other only on its measurement")
+        if lag == "actuator_lag":
+            return (f"a perturbation band reaching above the actuator lag's corner{where}, "
+                    f"where a first-order lag attenuates the applied torque and a pure "
+                    f"delay does not (both are a phase lag growing with frequency below "
+                    f"it); or a recorded motor current answering a command step")
         return (f"a perturbation band reaching above the sensor's corner{where}, where a "
                 f"first-order lag attenuates the torque and a pure delay does not (both "
                 f"are a phase lag growing with frequency below it); or a step or "

@@ -160,3 +160,33 @@ def test_the_report_gives_the_tie_in_report_md_and_report_json(antialias, tmp_pa
     md = (tmp_path / "out" / "report.md").read_text()
     assert "cannot tell them apart" in md and "above the sensor's corner" in md
     assert "| torque_sensor_lag |" in md and "**yes**" in md
+
+
+def test_one_shape_for_the_exoskeleton_ranking_with_a_named_pair():
+    """The exoskeleton's fits share one held-out split: its alternatives are read from
+    the ranking (ties.rows_from_fits), in the same row shape. To a named pair A + B: the
+    other pairs A + C and the singles other than A and B (A alone is the pair's own
+    first step, not an alternative)."""
+    from types import SimpleNamespace
+
+    from diagnosis.pipeline.verdict import alternatives_of
+
+    def fit(effects, share, nameable=True):
+        return SimpleNamespace(effects=tuple(effects), nameable=nameable,
+                               held_out_gap=1.0 - share,
+                               params={e: {"time_constant_s": 0.002} for e in effects})
+    singles = [fit(["gravity"], 0.60), fit(["delay"], 0.20), fit(["actuator_lag"], 0.93)]
+    pairs = [fit(["gravity", "delay"], 0.95), fit(["gravity", "actuator_lag"], 0.93),
+             fit(["gravity", "friction"], 0.50)]
+    r = SimpleNamespace(singles=singles, pairs=pairs, g0_held=1.0, alternatives=None)
+    rows = alternatives_of(r, pairs[0])
+    assert [x["name"] for x in rows] == ["actuator_lag", "gravity + actuator_lag",
+                                         "gravity + friction"]
+    assert [x["indistinguishable"] for x in rows] == [True, True, False]
+    assert rows[0]["split"] == "the held-out units every fit shares"
+    # delay against actuator_lag: the actuator's corner (1 / (2 pi 2 ms) = 80 Hz)
+    assert "above the actuator lag's corner (1 / (2 pi T) = 80 Hz" in rows[0]["separate"]
+    assert rows[1]["separate"] == rows[0]["separate"]
+    from diagnosis import ties as t
+    assert t.indistinguishable(rows, pairs[0].effects) == [
+        "gravity + delay", "actuator_lag", "gravity + actuator_lag"]
