@@ -129,8 +129,10 @@ def verdict_text(verdict, named, chosen, g0_held, residual, amplitude, best=None
     if chosen is None:
         return ("unexplained: " + _not_named(best, g0_held, best_params) + "; the gap lies in "
                 + "; ".join(rest_where(residual)) + "." + amp)
-    share = 100 * reduction(g0_held, chosen.held_out_gap)
-    text = f"{' + '.join(named)} closes {share:.0f} % of the held-out gap" + _pair_parts(
+    share = reduction(g0_held, chosen.held_out_gap)
+    # 99.9 %, not 100 %, when it is not all (the tie sentence then gives the same figure)
+    text = (f"{' + '.join(named)} closes {100 * share:.{_digits(share)}f} % of the held-out "
+            f"gap") + _pair_parts(
         chosen, best, g0_held)
     if verdict == VERDICT_PARTLY:
         return ("partly explained: " + text + "; the rest lies in "
