@@ -120,7 +120,8 @@ def main(argv=None) -> int:
            "indistinguishable": report_json.get("indistinguishable"),
            "alternatives": [{k: a.get(k) for k in
                              ("name", "held_out_reduction", "named_held_out_reduction",
-                              "split", "own_split", "own_held_out_reduction", "rescored",
+                              "split", "own_split", "own_held_out_reduction",
+                              "named_on_own_split", "rescored",
                               "nameable", "indistinguishable", "closes_more", "separate")}
                             for a in report_json.get("alternatives", [])],
            # a named pair's first effect judged alone: its alternatives on its split
@@ -129,7 +130,8 @@ def main(argv=None) -> int:
                "indistinguishable": single_alt["indistinguishable"],
                "rows": [{k: a.get(k) for k in
                          ("name", "held_out_reduction", "named_held_out_reduction",
-                          "own_split", "own_held_out_reduction", "rescored", "nameable",
+                          "own_split", "own_held_out_reduction", "named_on_own_split",
+                          "rescored", "nameable",
                           "indistinguishable")} for a in single_alt["rows"]]},
            "stiffness_angle": None if angle[1] is None else {
                "rank": angle[0], "held_out_reduction": angle[1]["held_out_reduction"],

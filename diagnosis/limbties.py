@@ -21,7 +21,11 @@ same calibration samples. An alternative of the same split keeps its own figures
 fit saw the same calibration samples) and flags; a re-solved one is judged by the flags
 of its fit on the named split (a search bound, a negative gain): a drift rate on its
 search bound over the last 40 % of the trial may lie well inside it on interleaved
-blocks. The named fit keeps its own reduction.
+blocks. The named fit keeps its own reduction. For the reader (not the rule) the named
+model is also solved on each alternative's own split the same way
+(``named_on_own_split``): the splits suit each effect's form (a switching model
+interpolating between interleaved blocks follows any slow change), so the rule compares
+on the split of the fit the verdict names.
 
 Alternatives: to a named single, every other single fitted (the pairs are all built on
 the named single: it plus a partner, not an alternative to it); to a named pair, the
@@ -130,6 +134,7 @@ def alternatives(lf, preps, nominal, cfg, named, fits, pairs=(), *,
     share = named.held_out_reduction
     band = min(pr.band for pr in preps)
     rows, n_eval = [], 0
+    named_there = {}  # the named model on another split, by split text
     for a_eff, a_params, own, flagged, _ in _candidates(named, fits, pairs):
         a_split, a_text = split_of(preps, a_eff, cfg)
         if same_split(preps, split, a_split):
@@ -138,10 +143,16 @@ def alternatives(lf, preps, nominal, cfg, named, fits, pairs=(), *,
             continue
         s, shown, flags, k = score(lf, preps, a_params, nominal, cfg, split)
         n_eval += k
+        if a_text not in named_there:
+            # for the reader, not the rule: the named model on the alternative's split
+            named_there[a_text], _, _, k = score(lf, preps, params, nominal, cfg, a_split)
+            n_eval += k
         # judged as fitted on the named split: a fit on a search bound of its own split
         # may be inside its bounds there (and the other way round)
-        rows.append(ties.row(a_eff, shown, s, share, split=text, own_split=a_text,
-                             own_share=own, rescored=True, nameable=not flags))
+        r = ties.row(a_eff, shown, s, share, split=text, own_split=a_text,
+                     own_share=own, rescored=True, nameable=not flags)
+        r["named_on_own_split"] = named_there[a_text]
+        rows.append(r)
     rows = ties.judge(rows, eff, params, tie_share, band_hz=band)
     return {"rows": rows, "indistinguishable": ties.indistinguishable(rows, eff), "split": text,
             "named_held_out_reduction": share, "n_evaluations": n_eval}

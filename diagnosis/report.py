@@ -141,7 +141,9 @@ def alternatives_lines(report, top: int = 6) -> list:
            "indistinguishable | what would separate them |", "|---|---|---|---|---|"]
     for r in rows[:top]:
         own = ("same split" if not r.get("own_split") else
-               f"{_pct(r.get('own_held_out_reduction'))} % ({r['own_split']})")
+               f"{_pct(r.get('own_held_out_reduction'))} % ({r['own_split']}"
+               + (f"; {named} there: {_pct(r['named_on_own_split'])} %"
+                  if r.get("named_on_own_split") is not None else "") + ")")
         tie = ("**yes**" + (" (closes more)" if r.get("closes_more") else "")
                if r.get("indistinguishable") else
                "no" if r.get("nameable", True) else "no (flagged fit)")

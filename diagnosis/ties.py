@@ -10,6 +10,8 @@ One shape for every experiment. An *alternative* is a row
      "points_behind": 100 (named - alternative), "split": that split, in words,
      "own_split": the alternative's own held-out split (None: the same),
      "own_held_out_reduction": its reduction there (as the ranking shows it),
+     "named_on_own_split": the named model's reduction there (a re-solved row only;
+     for the reader, not the rule),
      "rescored": True when it was solved again on the named fit's split,
      "nameable": False for a fit with a flag (a search bound, a negative gain),
      "indistinguishable": bool, "closes_more": bool, "separate": what would separate it
@@ -66,6 +68,7 @@ def row(effects, params, share, named_share, *, split, own_split=None, own_share
                               if ok and named_share is not None else None),
             "split": split, "own_split": own_split,
             "own_held_out_reduction": None if own_share is None else float(own_share),
+            "named_on_own_split": None,
             "rescored": bool(rescored), "nameable": bool(nameable),
             "indistinguishable": False, "closes_more": False, "separate": None}
 

@@ -209,7 +209,7 @@ class PositionServo(Experiment):
                      else next((p for p in pairs if tuple(p.effects) == eff), None))
             if named is None:
                 return None
-            return _resumable(store, ("limbties", list(eff), repr(cfg)),
+            return _resumable(store, ("limbties", 2, list(eff), repr(cfg)),
                               lambda: lt.alternatives(lf, preps, nominal, cfg, named, fits,
                                                       pairs),
                               lambda d: d, lambda d: d)
