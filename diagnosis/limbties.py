@@ -22,8 +22,9 @@ fit saw the same calibration samples) and flags; a re-solved one is judged by th
 of its fit on the named split (a search bound, a negative gain): a drift rate on its
 search bound over the last 40 % of the trial may lie well inside it on interleaved
 blocks. The named fit keeps its own reduction. For the reader (not the rule) the named
-model is also solved on each alternative's own split the same way
-(``named_on_own_split``): the splits suit each effect's form (a switching model
+model is also solved the same way on the own split of each alternative whose own figure
+comes within the margin of the named one's (``named_on_own_split``, else None): the
+splits suit each effect's form (a switching model
 interpolating between interleaved blocks follows any slow change), so the rule compares
 on the split of the fit the verdict names.
 
@@ -143,15 +144,18 @@ def alternatives(lf, preps, nominal, cfg, named, fits, pairs=(), *,
             continue
         s, shown, flags, k = score(lf, preps, a_params, nominal, cfg, split)
         n_eval += k
-        if a_text not in named_there:
-            # for the reader, not the rule: the named model on the alternative's split
+        # for the reader, not the rule: the named model on the alternative's split,
+        # where the alternative's own figure comes within the margin of the named one's
+        # (the comparison the ranking invites)
+        near = own is not None and share is not None and own >= share - tie_share
+        if near and a_text not in named_there:
             named_there[a_text], _, _, k = score(lf, preps, params, nominal, cfg, a_split)
             n_eval += k
         # judged as fitted on the named split: a fit on a search bound of its own split
         # may be inside its bounds there (and the other way round)
         r = ties.row(a_eff, shown, s, share, split=text, own_split=a_text,
                      own_share=own, rescored=True, nameable=not flags)
-        r["named_on_own_split"] = named_there[a_text]
+        r["named_on_own_split"] = named_there.get(a_text) if near else None
         rows.append(r)
     rows = ties.judge(rows, eff, params, tie_share, band_hz=band)
     return {"rows": rows, "indistinguishable": ties.indistinguishable(rows, eff), "split": text,

@@ -10,8 +10,9 @@ One shape for every experiment. An *alternative* is a row
      "points_behind": 100 (named - alternative), "split": that split, in words,
      "own_split": the alternative's own held-out split (None: the same),
      "own_held_out_reduction": its reduction there (as the ranking shows it),
-     "named_on_own_split": the named model's reduction there (a re-solved row only;
-     for the reader, not the rule),
+     "named_on_own_split": the named model's reduction there (a re-solved row whose
+     own figure comes within the margin of the named one's; for the reader, not the
+     rule),
      "rescored": True when it was solved again on the named fit's split,
      "nameable": False for a fit with a flag (a search bound, a negative gain),
      "indistinguishable": bool, "closes_more": bool, "separate": what would separate it

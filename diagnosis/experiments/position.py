@@ -199,9 +199,11 @@ class PositionServo(Experiment):
             fit.bound_flags = [x for x in f.at_search_bound if x not in shown
                                and not x.endswith("< 0 (unphysical)")]
             out.append(fit)
+
         def alternatives(chosen):
             """The alternatives to the named fit ``chosen`` (a fitting.EffectFit of
-            ``out`` or of the pairs), each on its held-out split (diagnosis.limbties);
+            ``out`` or of the pairs), each judged on the held-out split of ``chosen``
+            (diagnosis.limbties);
             None when it is not one of these fits."""
             from .. import limbties as lt
             eff = tuple(chosen.effects)
@@ -209,7 +211,7 @@ class PositionServo(Experiment):
                      else next((p for p in pairs if tuple(p.effects) == eff), None))
             if named is None:
                 return None
-            return _resumable(store, ("limbties", 2, list(eff), repr(cfg)),
+            return _resumable(store, ("limbties", 3, list(eff), repr(cfg)),
                               lambda: lt.alternatives(lf, preps, nominal, cfg, named, fits,
                                                       pairs),
                               lambda d: d, lambda d: d)

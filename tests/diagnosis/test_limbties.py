@@ -121,8 +121,9 @@ def test_runner_ups_of_another_split_are_scored_on_the_named_split():
     assert drift["nameable"] and drift["indistinguishable"]
     assert d.indistinguishable == ["stiffness_saturating", "stiffness_drift"]
     assert "a longer recording" in drift["separate"]
-    # for the reader: the named model solved on the alternative's own split too
-    assert drift["named_on_own_split"] is not None
+    # the named model on an alternative's own split is solved for the reader only where
+    # the ranking invites the comparison (its own figure within 5 points): not here
+    assert all(r["named_on_own_split"] is None for r in d.alternatives)
 
 
 def test_separation_advice_is_specific_to_the_pair():
