@@ -128,8 +128,11 @@ def sentence(named, rows, tie_share: float = TIE_SHARE) -> str:
 def _pct(share) -> str:
     if share is None or not math.isfinite(share):
         return "-"
+    from .pipeline.verdict import _digits
     v = 100 * share
-    return f"{v:.1f}" if 99.0 <= v < 100.0 or abs(v) < 10 else f"{v:.0f}"
+    if 0.99 <= share < 1.0:
+        return f"{v:.{_digits(share)}f}"
+    return f"{v:.1f}" if abs(v) < 10 else f"{v:.0f}"
 
 
 def rows_from_fits(chosen, singles, pairs, g0_held) -> list:

@@ -166,8 +166,14 @@ def _pair_parts(chosen, single, g0_held) -> str:
 
 
 def _digits(share: float) -> int:
-    """Decimals that keep a share close to 100 % apart from 100 (99.3, not 99)."""
-    return 1 if 0.99 <= share < 1.0 else 0
+    """Decimals that keep a share close to 100 % apart from 100 (99.3, not 99; 99.995,
+    not 100.0)."""
+    if not 0.99 <= share < 1.0:
+        return 0
+    d = 1
+    while d < 6 and round(100 * share, d) >= 100.0:
+        d += 1
+    return d
 
 
 def _not_named(best, g0_held, params=None) -> str:
