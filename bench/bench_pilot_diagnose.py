@@ -10,7 +10,8 @@ copied: only figures are written). Prints a stage table (wall and CPU seconds of
 pipeline stage, and of every effect fitted in the which stage) and writes
 bench/results/time_state_pilot[_TAG].json: wall and CPU time (this process, and the
 worker processes it reaped), the load average, the stage table, the verdict, the
-state-varying effect's rank, held-out reduction and split, and the ranking.
+state-varying effect's rank, held-out reduction and split, the ranking, and the ties
+(``indistinguishable``, every ``alternatives`` row on the named fit's split).
 """
 
 from __future__ import annotations
@@ -49,13 +50,37 @@ def _timed(rows: list, label: str, fn):
 
 
 def instrument(stages: list, fits: list) -> None:
-    """Time every pipeline stage and every limbfit effect fit (this process)."""
+    """Time every pipeline stage, every limbfit effect fit and the alternatives'
+    re-scoring (this process)."""
     from diagnosis import limbfit, pipeline
     for st in pipeline.STAGES:
         st.run = _timed(stages, st.__name__.rsplit(".", 1)[-1], st.run)
     limbfit.fit_effect = _timed(fits, lambda preps, name, *a, **k: name, limbfit.fit_effect)
     limbfit.add_intervals = _timed(fits, lambda fit, *a, **k: f"jackknife ({fit.effect})",
                                    limbfit.add_intervals)
+    from diagnosis import limbties  # the alternatives judged on the named fit's split
+    limbties.alternatives = _timed(fits, "limbties (alternatives)", limbties.alternatives)
+
+
+def record_single_alternatives(kept: dict) -> None:
+    """When a pair is named, also judge the alternatives of its first effect as if it
+    were named alone (diagnosis.limbties on the best single's split): the comparison the
+    summary made before issue 21 item 3 was mended (runner-ups of other splits)."""
+    from diagnosis.pipeline import verdict
+    inner = verdict.alternatives_of
+
+    def wrapper(r, chosen):
+        own = getattr(r, "alternatives", None)
+        best = r.singles[0] if r.singles else None
+        if callable(own) and chosen is not None and len(chosen.effects) > 1 \
+                and best is not None and best.effects == chosen.effects[:1]:
+            res = own(best)
+            if res is not None:
+                kept["best_single"] = list(best.effects)
+                kept["rows"] = res["rows"]
+                kept["indistinguishable"] = res["indistinguishable"]
+        return inner(r, chosen)
+    verdict.alternatives_of = wrapper
 
 
 def main(argv=None) -> int:
@@ -75,6 +100,8 @@ def main(argv=None) -> int:
     import_wall, import_cpu = time.perf_counter() - t0, time.process_time() - c0
     stages, fits = [{"stage": "import", "wall_s": import_wall, "cpu_s": import_cpu}], []
     instrument(stages, fits)
+    single_alt = {}
+    record_single_alternatives(single_alt)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(args.out) if args.out else Path(tmp) / "out"
         rep = diagnose(str(PILOT), folder, progress=False, workers=args.workers)
@@ -88,6 +115,24 @@ def main(argv=None) -> int:
            "workers": args.workers, "load_1min": load, "load_1min_after": os.getloadavg()[0],
            "target_s": 30.0, "stages": stages, "which_fits": fits,
            "verdict": rep.verdict, "named": rep.named, "summary": rep.summary,
+           # ties (issue 21 item 3): the models these trials cannot tell apart, and every
+           # alternative judged on the named fit's held-out split (diagnosis.limbties)
+           "indistinguishable": report_json.get("indistinguishable"),
+           "alternatives": [{k: a.get(k) for k in
+                             ("name", "held_out_reduction", "named_held_out_reduction",
+                              "split", "own_split", "own_held_out_reduction",
+                              "named_on_own_split", "rescored",
+                              "nameable", "indistinguishable", "closes_more", "separate")}
+                            for a in report_json.get("alternatives", [])],
+           # a named pair's first effect judged alone: its alternatives on its split
+           "alternatives_to_best_single": None if not single_alt else {
+               "named_alone": single_alt["best_single"],
+               "indistinguishable": single_alt["indistinguishable"],
+               "rows": [{k: a.get(k) for k in
+                         ("name", "held_out_reduction", "named_held_out_reduction",
+                          "own_split", "own_held_out_reduction", "named_on_own_split",
+                          "rescored", "nameable",
+                          "indistinguishable")} for a in single_alt["rows"]]},
            "stiffness_angle": None if angle[1] is None else {
                "rank": angle[0], "held_out_reduction": angle[1]["held_out_reduction"],
                "params": angle[1]["params"], "split": angle[1].get("split")},
@@ -113,6 +158,7 @@ def main(argv=None) -> int:
     print(f"pilot diagnosed in {wall:.1f} s wall, {cpu:.1f} s CPU + {child:.1f} s in workers "
           f"(workers {args.workers or 'one per core'}, load {load:.1f} -> "
           f"{out['load_1min_after']:.1f}; target 30 s); verdict {rep.verdict}; "
+          f"indistinguishable {out['indistinguishable']}; "
           f"stiffness_angle rank {angle[0]}, held-out reduction "
           f"{angle[1] and angle[1]['held_out_reduction']}; results/{name}")
     return 0

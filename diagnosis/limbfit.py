@@ -931,6 +931,9 @@ class PositionDiagnosis:
     nominal : the nominal fit (limb K, B, I; gaps); ranking : EffectFit dicts, best first;
     pairs : PairFit dicts built on the best single (diagnosis.limbpairs), best first;
     gap : nominal gaps (calibration, held-out, all), threshold, the named held-out reduction.
+    indistinguishable : the alternatives that explain the held-out gap as well as the
+        named fit, on its split (diagnosis.limbties; [] when none or nothing named);
+    alternatives : every alternative's row (diagnosis.ties), best first.
     """
 
     verdict: str
@@ -943,6 +946,8 @@ class PositionDiagnosis:
     elapsed_s: float
     n_evaluations: int
     pairs: list = field(default_factory=list)
+    indistinguishable: list = field(default_factory=list)
+    alternatives: list = field(default_factory=list)
 
 
 def changes_in_time(records) -> list:
@@ -1233,6 +1238,11 @@ def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosi
     fitted = {best.effect: best.params} if best else {}
     if pair is not None:
         fitted = dict(pair.params)
+    alt = {"rows": [], "indistinguishable": [], "n_evaluations": 0}
+    if named:
+        from . import limbties
+        alt = limbties.alternatives(sys.modules[__name__], preps, nominal, cfg,
+                                    pair if pair is not None else best, fits, pairs)
     return PositionDiagnosis(
         verdict=verdict, named=named, fitted=fitted,
         intervals={best.effect: best.intervals} if best else {},
@@ -1248,4 +1258,6 @@ def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosi
                                           else best.held_out_reduction if best else None)},
         elapsed_s=time.perf_counter() - t0,
         n_evaluations=sum(f.n_evaluations for f in fits) + sum(p.n_evaluations
-                                                                 for p in pairs))
+                                                                 for p in pairs)
+        + alt["n_evaluations"],
+        indistinguishable=alt["indistinguishable"], alternatives=alt["rows"])

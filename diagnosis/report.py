@@ -42,8 +42,11 @@ class DiagnosisReport:
     intervals: dict = field(default_factory=dict)
     out_dir: object = None
     extras: dict = field(default_factory=dict, repr=False)
-    #: effects that explain the held-out gap as well as the named one (verdict.ties)
+    #: effects (or pairs) that explain the held-out gap as well as the named one, on its
+    #: held-out split (diagnosis.ties; [] when none)
     indistinguishable: list = field(default_factory=list)
+    #: every alternative to the named fit, judged on its split (diagnosis.ties rows)
+    alternatives: list = field(default_factory=list)
     #: how the trials were grouped, in one line (estimation.grouping.describe)
     grouping: str = ""
     #: the named model in full: K, B, I and the effect's parameters, each [value, low,
@@ -54,6 +57,7 @@ class DiagnosisReport:
         return {"format": "arm-impedance-diagnosis/1", "verdict": self.verdict,
                 "summary": self.summary, "named_effects": self.named,
                 "indistinguishable": self.indistinguishable,
+                "alternatives": self.alternatives,
                 "named_model": self.named_model,
                 "fitted_parameters": self.fitted, "fitted_intervals_95": self.intervals,
                 "amplitude_dependence": self.amplitude,
@@ -122,6 +126,39 @@ def _params(p: dict) -> str:
                      for e, d in p.items())
 
 
+def alternatives_lines(report, top: int = 6) -> list:
+    """report.md's table of the named fit's alternatives (diagnosis.ties rows), each on
+    the named fit's held-out split; [] when there are none."""
+    rows = report.alternatives or []
+    if not rows:
+        return []
+    named = " + ".join(report.named)
+    out = [f"Alternatives to {named}, each judged on the held-out split of {named} "
+           f"({rows[0]['split']}), where {named} closes "
+           f"{_pct(rows[0]['named_held_out_reduction'])} % of the gap; an alternative "
+           f"within 5 points of it, or above, is indistinguishable here:", "",
+           "| alternative | held-out reduction, same split | on its own split | "
+           "indistinguishable | what would separate them |", "|---|---|---|---|---|"]
+    for r in rows[:top]:
+        own = ("same split" if not r.get("own_split") else
+               f"{_pct(r.get('own_held_out_reduction'))} % ({r['own_split']}"
+               + (f"; {named} there: {_pct(r['named_on_own_split'])} %"
+                  if r.get("named_on_own_split") is not None else "") + ")")
+        tie = ("**yes**" + (" (closes more)" if r.get("closes_more") else "")
+               if r.get("indistinguishable") else
+               "no" if r.get("nameable", True) else "no (flagged fit)")
+        out.append(f"| {r['name']} | {_pct(r['held_out_reduction'])} % | {own} | {tie} | "
+                   f"{r.get('separate') or '-'} |")
+    if len(rows) > top:
+        out.append(f"| ({len(rows) - top} more in report.json) | | | | |")
+    return out + [""]
+
+
+def _pct(share) -> str:
+    from .ties import _pct as pct
+    return pct(share)
+
+
 def markdown(report) -> str:
     """The report page (Markdown)."""
     g = report.gap
@@ -145,6 +182,7 @@ def markdown(report) -> str:
                 for e, d in report.intervals.items() if d), ""]
         if report.named_model:
             lines += named_model_lines(report.named_model)
+        lines += alternatives_lines(report)
         lines += [
                   f"Held-out gap ({m}) {_fmt(g['nominal_held_out'])} -> "
                   f"{_fmt(g['named_held_out'])} (reduction "

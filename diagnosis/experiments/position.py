@@ -127,7 +127,10 @@ class PositionServo(Experiment):
             ``fits`` (fitting.EffectFit, best first, each with ``intervals`` and the
             re-estimated limb as ``model``), ``pairs`` (fitting.EffectFit of two effects,
             best first, each with its second effect's held-out test ``second_test``), ``g0_cal``, ``g0_held``, ``g0_all``,
-            ``significant``, ``threshold``, ``noise_floor``, ``measure``.
+            ``significant``, ``threshold``, ``noise_floor``, ``measure``, and
+            ``alternatives``: a function of the named fit giving its alternatives, each
+            judged on the named fit's held-out split (diagnosis.limbties.alternatives;
+            computed once per named fit, kept in the resume store).
         """
         from .. import limbfit as lf
         from ..catalogue import at_search_bound
@@ -198,7 +201,25 @@ class PositionServo(Experiment):
             fit.bound_flags = [x for x in f.at_search_bound if x not in shown
                                and not x.endswith("< 0 (unphysical)")]
             out.append(fit)
+
+        def alternatives(chosen):
+            """The alternatives to the named fit ``chosen`` (a fitting.EffectFit of
+            ``out`` or of the pairs), each judged on the held-out split of ``chosen``
+            (diagnosis.limbties);
+            None when it is not one of these fits."""
+            from .. import limbties as lt
+            eff = tuple(chosen.effects)
+            named = (next((f for f in fits if (f.effect,) == eff), None) if len(eff) == 1
+                     else next((p for p in pairs if tuple(p.effects) == eff), None))
+            if named is None:
+                return None
+            return _resumable(store, ("limbties", 3, list(eff), repr(cfg)),
+                              lambda: lt.alternatives(lf, preps, nominal, cfg, named, fits,
+                                                      pairs),
+                              lambda d: d, lambda d: d)
+
         return {"fits": out, "pairs": [_pair_fit(p, trials[0].fs) for p in pairs],
+                "alternatives": alternatives,
                 "g0_cal": g["cal"].value, "g0_held": g["held"].value,
                 "g0_all": g["all"].value, "significant": significant,
                 "threshold": float(g["all"].threshold(cfg)),

@@ -32,6 +32,7 @@ def build(r) -> DiagnosisReport:
     fitted = {} if chosen is None else chosen.params
     intervals = {} if chosen is None or not chosen.intervals else chosen.intervals
     ranking, pair_rows = r.ranking, r.pair_rows
+    alternatives = list(getattr(r, "alternative_rows", []) or [])
     if r.units:
         # the trials were rescaled (conventions.normalise_units): values back in the
         # file's units (impedances, gains and masses scale with tau_h / theta)
@@ -41,11 +42,14 @@ def build(r) -> DiagnosisReport:
         intervals = _effects_in_units(intervals, rho)
         ranking = [_row_in_units(row, rho) for row in ranking]
         pair_rows = [_row_in_units(row, rho) for row in pair_rows]
+        alternatives = [{**a, "params": _effects_in_units(a.get("params") or {}, rho)}
+                        for a in alternatives]
     named = None if chosen is None else named_model(model, fitted, intervals)
     return DiagnosisReport(
         named_model=named,
         verdict=r.verdict, named=r.named, summary=r.summary, amplitude=r.amplitude,
         indistinguishable=list(getattr(r, "indistinguishable", [])),
+        alternatives=alternatives,
         conventions=[f.to_dict() for f in r.findings], numerics=r.numerics,
         timing={"workers": r.workers,
                 "scheduler": None if r.scheduler is None else str(r.scheduler),

@@ -64,6 +64,9 @@ class DiagnosisRun:
     significant: bool = False
     n_worker_sims: int = 0
     fit_measure: dict | None = None   # an experiment's own fit measure (which)
+    #: an experiment's own judge of the named fit's alternatives (which; None: the
+    #: ranking's shared split, diagnosis.ties.rows_from_fits)
+    alternatives: object = None
     ranking: list = field(default_factory=list)
     pair_rows: list = field(default_factory=list)
     # verdict
@@ -75,6 +78,9 @@ class DiagnosisRun:
     amplitude: dict = field(default_factory=dict)
     summary: str = ""
     timings: list = field(default_factory=list)
+    #: alternatives to the named fit (diagnosis.ties rows) and the tied ones' names
+    alternative_rows: list = field(default_factory=list)
+    indistinguishable: list = field(default_factory=list)
     # report
     report: object = None
 

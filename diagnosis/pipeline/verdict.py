@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 from .. import catalogue as cat
+from .. import ties as tie_rule
 from ..config import (VERDICT_CONVENTION, VERDICT_EFFECT, VERDICT_NONE, VERDICT_PARTLY,
                       VERDICT_UNEXPLAINED, DiagnosisConfig)
 from ..fitting import EffectFit
@@ -75,9 +76,10 @@ def run(r) -> None:
         summary = ("set-up/convention mismatch found and corrected: "
                    + "; ".join(f.text() for f in mismatches) + ". After correction: "
                    + summary)
-    r.indistinguishable = ties(chosen, r.singles, r.g0_held) if named else []
+    r.alternative_rows = alternatives_of(r, chosen) if named else []
+    r.indistinguishable = tie_rule.indistinguishable(r.alternative_rows, named)
     if r.indistinguishable:
-        summary += " " + tie_text(named, r.indistinguishable, chosen, r.singles, r.g0_held)
+        summary += " " + tie_rule.sentence(named, r.alternative_rows)
     r.verdict, r.named, r.chosen, r.after = verdict, named, chosen, after
     r.amplitude, r.summary = amplitude, summary
 
@@ -127,8 +129,10 @@ def verdict_text(verdict, named, chosen, g0_held, residual, amplitude, best=None
     if chosen is None:
         return ("unexplained: " + _not_named(best, g0_held, best_params) + "; the gap lies in "
                 + "; ".join(rest_where(residual)) + "." + amp)
-    share = 100 * reduction(g0_held, chosen.held_out_gap)
-    text = f"{' + '.join(named)} closes {share:.0f} % of the held-out gap" + _pair_parts(
+    share = reduction(g0_held, chosen.held_out_gap)
+    # 99.9 %, not 100 %, when it is not all (the tie sentence then gives the same figure)
+    text = (f"{' + '.join(named)} closes {100 * share:.{_digits(share)}f} % of the held-out "
+            f"gap") + _pair_parts(
         chosen, best, g0_held)
     if verdict == VERDICT_PARTLY:
         return ("partly explained: " + text + "; the rest lies in "
@@ -162,8 +166,14 @@ def _pair_parts(chosen, single, g0_held) -> str:
 
 
 def _digits(share: float) -> int:
-    """Decimals that keep a share close to 100 % apart from 100 (99.3, not 99)."""
-    return 1 if 0.99 <= share < 1.0 else 0
+    """Decimals that keep a share close to 100 % apart from 100 (99.3, not 99; 99.995,
+    not 100.0)."""
+    if not 0.99 <= share < 1.0:
+        return 0
+    d = 1
+    while d < 6 and round(100 * share, d) >= 100.0:
+        d += 1
+    return d
 
 
 def _not_named(best, g0_held, params=None) -> str:
@@ -210,31 +220,32 @@ def pair_earns_second(pair: EffectFit, single: EffectFit, cfg: DiagnosisConfig) 
 
 
 #: another effect within this share of the held-out gap of the named one (5 points of
-#: reduction) cannot be told from it on these trials (issue 21, item 3)
-TIE_SHARE = 0.05
+#: reduction), on the named fit's split, cannot be told from it (issue 21, item 3)
+TIE_SHARE = tie_rule.TIE_SHARE
 
 
-def ties(chosen, singles, g0_held, tie_share: float = TIE_SHARE) -> list:
-    """Names of the nameable single effects, other than the named ones, whose held-out
-    gap reduction comes within ``tie_share`` (a fraction of the nominal held-out gap) of
-    the named fit's: on these trials they explain the gap as well. [] when none."""
+def alternatives_of(r, chosen) -> list:
+    """The alternatives to the named fit ``chosen``, judged (diagnosis.ties rows, best
+    first): by the experiment's own judge when it has one (``r.alternatives``, the
+    position servo's diagnosis.limbties: its fits have held-out splits of their own),
+    else from the ranking, whose fits share one held-out split (the exoskeleton's)."""
     if chosen is None:
         return []
-    share = reduction(g0_held, chosen.held_out_gap)
-    return [f.effects[0] for f in singles
-            if f.nameable and len(f.effects) == 1 and f.effects[0] not in chosen.effects
-            and math.isfinite(reduction(g0_held, f.held_out_gap))
-            and reduction(g0_held, f.held_out_gap) >= share - tie_share]
+    own = getattr(r, "alternatives", None)
+    if callable(own):
+        res = own(chosen)
+        if res is not None:
+            return list(res["rows"])
+    rows = tie_rule.rows_from_fits(chosen, r.singles, r.pairs, r.g0_held)
+    return tie_rule.judge(rows, chosen.effects, chosen.params)
 
 
-def tie_text(named, tied, chosen, singles, g0_held) -> str:
-    """The sentence of a tie: the shares and what experiment would separate them."""
-    shares = {f.effects[0]: 100 * reduction(g0_held, f.held_out_gap) for f in singles
-              if len(f.effects) == 1}
-    others = ", ".join(f"{n} ({shares.get(n, math.nan):.0f} %)" for n in tied)
-    return (f"Indistinguishable here: {others} closes the held-out gap within "
-            f"{100 * TIE_SHARE:.0f} points of {' + '.join(named)} "
-            f"({100 * reduction(g0_held, chosen.held_out_gap):.0f} %); these trials cannot "
-            "tell them apart. A perturbation with a wider band, a recorded reference "
-            "(an independent torque or angle sensor) or another amplitude would separate "
-            "them.")
+def ties(chosen, singles, g0_held, tie_share: float = TIE_SHARE, pairs=()) -> list:
+    """The named ``chosen`` and the alternatives to it (fits of one shared held-out
+    split) that close the held-out gap within ``tie_share`` of it, or more; [] when no
+    alternative does (diagnosis.ties.indistinguishable)."""
+    if chosen is None:
+        return []
+    rows = tie_rule.rows_from_fits(chosen, singles, pairs, g0_held)
+    return tie_rule.indistinguishable(tie_rule.judge(rows, chosen.effects, chosen.params,
+                                                     tie_share), chosen.effects)

@@ -30,7 +30,9 @@ def run(r) -> None:
         r.singles, r.pairs = out["fits"], list(out.get("pairs", []))
         r.g0_cal, r.g0_held, r.significant = out["g0_cal"], out["g0_held"], out["significant"]
         r.fit_measure = {k: v for k, v in out.items()
-                         if k not in ("fits", "pairs", "nominal_limb")}
+                         if k not in ("fits", "pairs", "nominal_limb", "alternatives")}
+        # the experiment's own judge of the named fit's alternatives (verdict stage)
+        r.alternatives = out.get("alternatives")
         r.n_worker_sims += sum(f.n_evaluations for f in r.singles + r.pairs)
         return
     norms = (r.ev_cal.norms, r.ev_held.norms)

@@ -182,23 +182,42 @@ def test_a_storage_finding_is_told_beside_the_verdict_never_instead(monkeypatch)
 
 
 def test_an_effect_within_5_points_of_the_named_one_is_reported_as_a_tie():
-    # issue 21 item 3: the anti-alias filter case, channel_delay 90 %, sensor lag 86 %
+    # issue 21 item 3: the anti-alias filter case, channel_delay 90 %, sensor lag 86 %,
+    # fits of one shared held-out split (the exoskeleton's ranking)
     from types import SimpleNamespace
 
-    from diagnosis.pipeline.verdict import tie_text, ties
+    from diagnosis import ties as tr
+    from diagnosis.pipeline.verdict import ties
 
-    def fit(name, share):
-        return SimpleNamespace(effects=(name,), nameable=True, held_out_gap=1.0 - share)
-    singles = [fit("channel_delay", 0.90), fit("torque_sensor_lag", 0.86),
+    def fit(name, share, params=None):
+        return SimpleNamespace(effects=(name,), nameable=True, held_out_gap=1.0 - share,
+                               params={name: params or {}})
+    singles = [fit("channel_delay", 0.90, {"delay_s": 0.002}),
+               fit("torque_sensor_lag", 0.86, {"time_constant_s": 0.002}),
                fit("wobbling_mass", 0.40)]
-    assert ties(singles[0], singles, 1.0) == ["torque_sensor_lag"]
-    text = tie_text(["channel_delay"], ["torque_sensor_lag"], singles[0], singles, 1.0)
+    assert ties(singles[0], singles, 1.0) == ["channel_delay", "torque_sensor_lag"]
+    rows = tr.judge(tr.rows_from_fits(singles[0], singles, [], 1.0), ("channel_delay",),
+                    singles[0].params, band_hz=30.0)
+    text = tr.sentence(["channel_delay"], rows)
     assert "torque_sensor_lag (86 %)" in text and "cannot tell them apart" in text
-    assert "wider band" in text
-    # 10 points apart: a winner, not a tie
+    # what would separate them is specific to the pair: a band above the sensor's corner
+    assert "above the sensor's corner (1 / (2 pi T) = 80 Hz" in text, text
+    assert "analysed to 30 Hz" in text
+    # 10 points apart: a winner, not a tie; closing more is a tie too
     singles[1] = fit("torque_sensor_lag", 0.80)
     assert ties(singles[0], singles, 1.0) == []
     assert ties(None, singles, 1.0) == []
+    singles[1] = fit("torque_sensor_lag", 0.95)
+    rows = tr.judge(tr.rows_from_fits(singles[0], singles, [], 1.0), ("channel_delay",),
+                    singles[0].params)
+    assert tr.indistinguishable(rows, ("channel_delay",)) == ["channel_delay",
+                                                              "torque_sensor_lag"]
+    assert rows[0]["closes_more"]
+    assert "closes more of it than channel_delay (90 %)" in tr.sentence(["channel_delay"],
+                                                                        rows)
+    # a flagged fit (a bound, a negative gain) is no alternative
+    singles[1].nameable = False
+    assert ties(singles[0], singles, 1.0) == []
 
 
 def test_report_json_has_indistinguishable_beside_named_effects(tmp_path):
@@ -208,6 +227,7 @@ def test_report_json_has_indistinguishable_beside_named_effects(tmp_path):
                           pairs=[], gap={}, where={}, arm={}, split={}, config={},
                           n_simulations=0, elapsed_s=0.0, trials=[])
     assert rep.to_dict()["indistinguishable"] == []
+    assert rep.to_dict()["alternatives"] == []
 
 
 def test_every_candidate_starts_from_the_step_the_nominal_needed():
