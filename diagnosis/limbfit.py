@@ -86,6 +86,9 @@ class FitConfig:
     name_reduction : held-out reduction an effect needs to be named.
     grid : grid points per nonlinear parameter; refine_starts: grid points refined.
     pairs : try a second effect on top of the best single (diagnosis.limbpairs).
+    form_profile : widen the named (best) fit's jackknife intervals to their envelope over
+        refits at the plausible alternatives of the choices the fit ties or picks
+        (diagnosis.formprofile: reflex and wobbling-mass damping, rectification).
     """
 
     band_hz: float = 30.0
@@ -104,6 +107,7 @@ class FitConfig:
     pairs: bool = True
     noise_floor: str = "coherence"
     model_tolerance: float = 1e-4
+    form_profile: bool = True
 
 
 @dataclass
@@ -900,6 +904,8 @@ class EffectFit:
     at_search_bound: list = field(default_factory=list)
     n_evaluations: int = 0
     limb_ci: dict | None = None
+    #: the intervals' form profile (diagnosis.formprofile.profile), None when not profiled
+    form_profile: dict | None = None
 
     def as_dict(self) -> dict:
         return {"effects": [self.effect], "effect": self.effect, "params": self.params,
@@ -911,6 +917,7 @@ class EffectFit:
                 "at_search_bound": self.at_search_bound,
                 "n_evaluations": self.n_evaluations,
                 **({"split": self.split} if getattr(self, "split", None) else {}),
+                **({"form_profile": self.form_profile} if self.form_profile else {}),
                 **({"preferred_over": self.preferred_over}
                    if getattr(self, "preferred_over", None) else {})}
 
@@ -1033,7 +1040,21 @@ def fit_effect(preps, name: str, nominal: dict, cfg: FitConfig = FitConfig(), *,
     fit = EffectFit(name, out_params, ci, limb, obj, g_cal.value, g_held.value,
                     reduction, bound, n_eval, limb_ci=limb_ci)
     fit._problem = (prob, x, lin)
+    fit.nominal_held_out_gap = nom_held
+    if ci is not None:
+        _profile_form(fit, cfg)
     return fit
+
+
+def _profile_form(fit: EffectFit, cfg: FitConfig):
+    """The fit's intervals widened to include its form (diagnosis.formprofile), when
+    ``cfg.form_profile`` and the effect has profiled alternatives."""
+    if not cfg.form_profile:
+        return None
+    from . import formprofile
+    if not formprofile.profiled(fit.effect):
+        return None
+    return formprofile.profile(sys.modules[__name__], fit, cfg)
 
 
 def fit_record(fit: EffectFit) -> dict:
@@ -1071,6 +1092,7 @@ def fit_from_record(preps, d: dict, nominal: dict, cfg: FitConfig = FitConfig())
         fit.split = d.get("split")
     else:
         prob = _Problem(preps, name, d["fixed"], cfg, nominal["solution"].cal_energy)
+    fit.nominal_held_out_gap = nominal["gaps"]["held"].value
     x = np.asarray(d["x"], dtype=float)
     if x.shape != (len(prob.nl),):
         raise ValueError(f"record of {name!r} has {x.size} coordinates, not {len(prob.nl)}")
@@ -1086,6 +1108,8 @@ def add_intervals(fit: EffectFit, cfg: FitConfig = FitConfig()) -> EffectFit:
         fit.intervals, k = _jackknife(prob, x, lin, cfg)
     fit.limb_ci = getattr(prob, "limb_ci", None)
     fit.n_evaluations += k
+    if not vary.is_varying(fit.effect):
+        _profile_form(fit, cfg)
     return fit
 
 
