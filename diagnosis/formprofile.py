@@ -15,8 +15,9 @@ reject is kept (its calibration gap exceeds the best profiled one's by less than
 gap's significance threshold: ``significance_sigma`` standard errors + ``floor_margin``
 x floor + ``model_tolerance``, the test the nominal gap passes), its jackknife is run, and
 every parameter's interval becomes the envelope [min low, max high] over the kept
-choices, widened to the parameters half-way to a rejected neighbour on the grid (a truth
-between two grid values: the data resolve the damping more finely than the grid); the limb's K, B, I half-widths likewise (symmetric about
+choices, and towards a rejected neighbour on the grid to where the data reject the choice
+(bisection between the two grid values, :data:`BISECTIONS` refits; the data resolve the
+damping more finely than the grid); the limb's K, B, I half-widths likewise (symmetric about
 the point estimate, the largest distance to an end of a kept interval).
 
 The point estimate is the best-fitting profiled choice (lowest calibration gap): the
@@ -164,7 +165,9 @@ def profile(lf, fit, cfg) -> dict | None:
     half_delay = 0.5 / min(pr.fs for pr in preps)
     # a truth between a kept grid value and a rejected neighbour: the fit half-way
     # between them (the parameters interpolated) joins the envelope
-    mids = _midpoints(name, rows)
+    keep = lambda excess: excess - g_best.excess <= tol  # noqa: E731
+    mids, k_edges = _edges(lf, name, rows, keep, cfg, prob.unit, limb0)
+    n_eval += k_edges
     envelope = {}
     for k in fit.intervals:
         los = [r["intervals"][k][0] for r in kept if k in r["intervals"]]
@@ -225,22 +228,50 @@ def profile(lf, fit, cfg) -> dict | None:
     return record
 
 
-def _midpoints(name, rows) -> list:
-    """Parameters half-way between a kept and a rejected neighbour on the grid of a tied
-    continuous choice (the same discrete choices otherwise): [{param: value}]."""
-    out = []
+#: bisection steps between a kept grid value and a rejected neighbour
+BISECTIONS = 3
+
+
+def _edges(lf, name, rows, keep, cfg, unit, limb0) -> tuple:
+    """Where the kept region of a tied continuous choice ends between a kept grid value
+    and a rejected neighbour (the data resolve the damping more finely than the grid):
+    BISECTIONS refits half-way (on the log scale), each kept one's parameters joining the
+    envelope, then the parameters interpolated half-way between the last kept and the
+    last rejected. Returns ([{param: value}], evaluations)."""
+    from . import limb as lm
+    out, n_eval = [], 0
     for key in FORM_GRID.get(name, {}):
         own = rows[0]["fixed"]
-        line = [r for r in rows if key in r["fixed"] or r is rows[0]]
-        line = [r for r in line if all(r["fixed"].get(c) == own.get(c)
-                                       for c in own if c != key)]
-        from . import limb as lm
         tied = lm.DEFAULTS.get(name, {}).get(key)
+        line = [r for r in rows if all(r["fixed"].get(c) == own.get(c)
+                                       for c in set(own) | set(r["fixed"]) if c != key)]
         line.sort(key=lambda r: float(r["fixed"].get(key, tied)))
         for a, b in zip(line, line[1:]):
-            if a["kept"] != b["kept"]:
-                out.append({k: 0.5 * (a["params"][k] + b["params"][k]) for k in a["params"]})
-    return out
+            if a["kept"] == b["kept"]:
+                continue
+            good, bad = (a, b) if a["kept"] else (b, a)
+            zg, zb = float(good["fixed"].get(key, tied)), float(bad["fixed"].get(key, tied))
+            pg, xg = good["params"], good["_prob"][1]
+            pb = bad["params"]
+            for _ in range(BISECTIONS):
+                zm = math.sqrt(zg * zb)
+                pa = lf._Problem(good["_prob"][0].preps, name, {**own, key: zm}, cfg, unit)
+                xm = pa._refine(np.asarray(xg, float))
+                o, s, an = pa.evaluate(pa.params(xm))
+                n_eval += pa.n_eval
+                if s is None or not math.isfinite(o):
+                    zb = zm
+                    continue
+                pm = _values(lf, pa, xm, s, [k for k in pg if k not in
+                                             {p.name for p in pa.nl}])
+                g = lf._gap(pa.preps, s.residual, an, limb0, cfg, "cal")
+                if keep(g.excess):
+                    zg, pg, xg = zm, pm, xm
+                    out.append(pm)
+                else:
+                    zb, pb = zm, pm
+            out.append({k: 0.5 * (pg[k] + pb[k]) for k in pg})
+    return out, n_eval
 
 
 def _reduction(fit, held):

@@ -32,7 +32,11 @@ estimate plus ``floor_margin`` times the floor.
 Intervals: delete-one-block jackknife over ``n_jackknife`` contiguous blocks of the
 calibration samples (each block's fit refined from the full fit), +- 1.96 standard
 errors: contiguous blocks respect the residual's correlation in time, which the Jacobian
-of a least-squares fit ignores.
+of a least-squares fit ignores. The named (best) fit's intervals then include its form
+(``FitConfig.form_profile``, diagnosis.formprofile): refits at the plausible alternatives
+of the choices it ties (the reflex's and the wobbling mass's damping) or picks (the
+reflex's rectification), the envelope of the jackknife intervals of those the data do
+not reject, the point estimate the best-fitting choice.
 
 The fit uses only the calibration part (the first ``1 - held_out_fraction`` of every
 trial); the held-out reduction is 1 - gap(effect) / gap(nominal) on the last part, with
