@@ -11,9 +11,10 @@ activation damping 1.0 fitted with 0.7 moves the delay 5-15 %, its jackknife int
 ~0.1 ms wide). Here the named effect is refitted (its nonlinear parameters refined by
 Nelder-Mead from the fit's, K, B, I and the gains solved again) at every alternative of
 :data:`FORM_GRID`, and at the other rectification choice; an alternative the data do not
-reject is kept (its calibration gap exceeds the best profiled one's by less than that
-gap's significance threshold: ``significance_sigma`` standard errors + ``floor_margin``
-x floor + ``model_tolerance``, the test the nominal gap passes), its jackknife is run, and
+reject is kept (its calibration gap exceeds the best profiled one's by at most
+``significance_sigma`` standard errors of that gap plus ``floor_margin`` of its floor:
+:func:`keep_tolerance`), its
+jackknife is run, and
 every parameter's interval becomes the envelope [min low, max high] over the kept
 choices, and towards a rejected neighbour on the grid to where the data reject the choice
 (bisection between the two grid values, :data:`BISECTIONS` refits; the data resolve the
@@ -27,14 +28,18 @@ such as ``damping`` in the fit's parameters, which the named model simulates wit
 
 The grid, from the physiology (docs/diagnosis.md, "Intervals that include the form"):
 
-- reflex activation damping {0.5, 0.6, 0.7, 0.85, 1.0}: the second-order reflex dynamics of the
-  ankle's parallel-cascade identifications lie between under-damped and critically damped
-  (Kearney, Stein & Parameswaran 1997; Mirbagheri et al. 2000: about 0.5-1.0); labsim draws
-  0.6-0.9 (and 0.4-1.2 in its ``reflex_other_damping``);
-- wobbling-mass damping {0.15, 0.2, 0.3, 0.45, 0.6}: soft-tissue damping ratios of wobbling-mass
+- reflex activation damping {0.5, 0.6, 0.7, 0.85, 1.0, 1.2}: the second-order reflex
+  dynamics of the ankle's parallel-cascade identifications lie between under-damped and
+  critically damped (Kearney, Stein & Parameswaran 1997; Mirbagheri et al. 2000: about
+  0.5-1.0), and an activation of two real poles (excitation and contraction) is
+  over-damped, hence 1.2; labsim draws 0.6-0.9 (0.4-1.2 in its ``reflex_other_damping``);
+- wobbling-mass damping {0.1, 0.15, 0.2, 0.3, 0.45, 0.6}: soft-tissue damping ratios of wobbling-mass
   models, lightly damped to well damped (Gruber et al. 1998, about 0.1-0.5);
 - servo damping {0.5, 0.7, 1.0}: the closed-loop damping of a position servo's tuning
   (labsim's PD servo 0.6-1.0);
+- a rectified reflex's velocity threshold {0, 0.02, 0.05} rad/s (tied at 0: the rectifier
+  passes any stretch velocity; reflexes have a velocity threshold, small against the
+  perturbations' ~1-2 rad/s RMS velocity; labsim draws 0-0.05 rad/s);
 - the reflex's rectification: the other choice (rectified or linear; a rectified
   alternative with both stretch signs), at the tied damping.
 
@@ -51,8 +56,10 @@ import numpy as np
 #: the tied continuous choices profiled, per effect: {effect: {param: (values...)}}; the
 #: fit's own (tied) value is one of them
 FORM_GRID = {
-    "stretch_reflex": {"damping": (0.5, 0.6, 0.7, 0.85, 1.0)},
-    "wobbling_mass": {"damping": (0.15, 0.2, 0.3, 0.45, 0.6)},
+    "stretch_reflex": {"damping": (0.5, 0.6, 0.7, 0.85, 1.0, 1.2),
+                       # of a rectified reflex only: the velocity the rectifier passes above
+                       "threshold_rad_s": (0.0, 0.02, 0.05)},
+    "wobbling_mass": {"damping": (0.1, 0.15, 0.2, 0.3, 0.45, 0.6)},
     "servo_bandwidth": {"damping": (0.5, 0.7, 1.0)},
 }
 
@@ -69,6 +76,8 @@ def alternatives(name: str, fixed: dict) -> list:
     tied = lm.DEFAULTS.get(name, {})
     out = []
     for key, values in FORM_GRID.get(name, {}).items():
+        if key == "threshold_rad_s" and not fixed.get("rectified"):
+            continue  # a threshold acts on a rectified reflex only
         own = float(fixed.get(key, tied.get(key)))
         for v in values:
             if not math.isclose(v, own):
@@ -86,10 +95,21 @@ def alternatives(name: str, fixed: dict) -> list:
 def _own_label(name, fixed):
     from . import limb as lm
     tied = lm.DEFAULTS.get(name, {})
-    parts = [f"{k} = {float(fixed.get(k, tied.get(k))):g}" for k in FORM_GRID.get(name, {})]
+    parts = [f"{k} = {float(fixed.get(k, tied.get(k))):g}" for k in FORM_GRID.get(name, {})
+             if k != "threshold_rad_s" or fixed.get("rectified")]
     if "rectified" in fixed:
         parts.append(f"rectified = {bool(fixed['rectified'])}")
     return ", ".join(parts) + " (the fit's)"
+
+
+def keep_tolerance(gap, cfg) -> float:
+    """How much more calibration gap than the best profiled choice a kept choice may
+    leave: ``significance_sigma`` standard errors of the best's gap plus ``floor_margin``
+    of its floor (the significance threshold of a gap without its model tolerance: the
+    discrete model's own error is common to every choice fitted to the same samples; with
+    it the tolerance, ~1e-4 of the torque energy, kept a rectified reflex beside a linear
+    one 14 times better and a wobbling mass's interval 50-60 % wide)."""
+    return cfg.significance_sigma * gap.se + cfg.floor_margin * gap.floor
 
 
 def _values(lf, prob, x, sol, lin_names):
@@ -151,7 +171,7 @@ def profile(lf, fit, cfg) -> dict | None:
                      "_gap": g, "_prob": (pa, xa), "_sol": (s, a)})
     best = min(rows, key=lambda r: r["calibration_excess"])
     g_best = best["_gap"]
-    tol = g_best.threshold(cfg)
+    tol = keep_tolerance(g_best, cfg)
     for row in rows:
         row["kept"] = bool(row["calibration_excess"] - g_best.excess <= tol)
         if row["kept"] and row["intervals"] is None and cfg.n_jackknife >= 2:
@@ -209,7 +229,8 @@ def profile(lf, fit, cfg) -> dict | None:
         "profiled": {**{k: list(v) for k, v in FORM_GRID[name].items()},
                      **({"rectified": [False, True]} if "rectified" in prob.fixed else {})},
         "rule": ("an alternative is kept when its calibration gap exceeds the best profiled "
-                 "one's by at most that gap's significance threshold "
+                 "one's by at most significance_sigma standard errors of that gap plus "
+                 "floor_margin of its floor "
                  f"({tol:.3g}); the interval is the envelope of the kept jackknife "
                  "intervals (a delay's also +- half a sample period); the point estimate "
                  "is the best-fitting choice"),
@@ -254,7 +275,7 @@ def _edges(lf, name, rows, keep, cfg, unit, limb0) -> tuple:
             pg, xg = good["params"], good["_prob"][1]
             pb = bad["params"]
             for _ in range(BISECTIONS):
-                zm = math.sqrt(zg * zb)
+                zm = math.sqrt(zg * zb) if min(zg, zb) > 0 else 0.5 * (zg + zb)
                 pa = lf._Problem(good["_prob"][0].preps, name, {**own, key: zm}, cfg, unit)
                 xm = pa._refine(np.asarray(xg, float))
                 o, s, an = pa.evaluate(pa.params(xm))

@@ -1053,7 +1053,7 @@ def fit_effect(preps, name: str, nominal: dict, cfg: FitConfig = FitConfig(), *,
 def _profile_form(fit: EffectFit, cfg: FitConfig):
     """The fit's intervals widened to include its form (diagnosis.formprofile), when
     ``cfg.form_profile`` and the effect has profiled alternatives."""
-    if not cfg.form_profile:
+    if not cfg.form_profile or fit.at_search_bound:  # a flagged fit is never named
         return None
     from . import formprofile
     if not formprofile.profiled(fit.effect):
