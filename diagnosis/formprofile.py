@@ -226,7 +226,8 @@ def profile(lf, fit, cfg) -> dict | None:
               "held_out_gap": float(g_held.value),
               "held_out_reduction": _reduction(fit, g_held.value)}
     record = {
-        "profiled": {**{k: list(v) for k, v in FORM_GRID[name].items()},
+        "profiled": {**{k: list(v) for k, v in FORM_GRID[name].items()
+                        if k != "threshold_rad_s" or prob.fixed.get("rectified")},
                      **({"rectified": [False, True]} if "rectified" in prob.fixed else {})},
         "rule": ("an alternative is kept when its calibration gap exceeds the best profiled "
                  "one's by at most significance_sigma standard errors of that gap plus "
