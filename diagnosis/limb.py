@@ -12,7 +12,8 @@ matrices. :func:`limb_torque` adds the effects of ``effects`` (a dict ``{name: p
 like the catalogue's; ``{}`` is the nominal model (1)):
 
 ``stretch_reflex`` {gain G [N m s/rad], delay_s d [s], frequency_hz f_r [Hz],
-damping z_r [-] (default 0.7), rectified [bool] (default False), stretch_sign (+1/-1)}
+damping z_r [-] (default 0.7), rectified [bool] (default False), stretch_sign (+1/-1),
+threshold_rad_s [rad/s] (default 0: the rectifier passes sign v - threshold above 0)}
     The reflex pathway of the parallel-cascade model (Kearney, Stein & Parameswaran 1997,
     IEEE TBME 44(6)): joint velocity, delayed by d, optionally half-wave rectified (only
     velocities of sign ``stretch_sign`` stretch the muscle), through the 2nd-order
@@ -68,7 +69,8 @@ SERVO_EFFECTS = ("servo_bandwidth",)
 ALL_EFFECTS = LIMB_EFFECTS + CHANNEL_EFFECTS + SERVO_EFFECTS
 
 DEFAULTS = {
-    "stretch_reflex": {"damping": 0.7, "rectified": False, "stretch_sign": 1.0},
+    "stretch_reflex": {"damping": 0.7, "rectified": False, "stretch_sign": 1.0,
+                       "threshold_rad_s": 0.0},
     "stiffness_amplitude": {"reference_rad": 0.01, "window_s": 0.5},
     "wobbling_mass": {"damping": 0.3},
     "servo_bandwidth": {"damping": 0.7},
@@ -251,7 +253,7 @@ def reflex_torque(omega: np.ndarray, fs: float, params: dict) -> np.ndarray:
     v = fractional_delay(omega, float(p["delay_s"]) * fs)
     if p["rectified"]:
         sign = 1.0 if float(p["stretch_sign"]) >= 0 else -1.0
-        v = np.maximum(sign * v, 0.0) * sign
+        v = np.maximum(sign * v - float(p["threshold_rad_s"]), 0.0) * sign
     b, a = second_order_lowpass(float(p["frequency_hz"]), float(p["damping"]), fs)
     return float(p["gain"]) * signal.lfilter(b, a, v, axis=0)
 

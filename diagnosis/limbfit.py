@@ -32,7 +32,11 @@ estimate plus ``floor_margin`` times the floor.
 Intervals: delete-one-block jackknife over ``n_jackknife`` contiguous blocks of the
 calibration samples (each block's fit refined from the full fit), +- 1.96 standard
 errors: contiguous blocks respect the residual's correlation in time, which the Jacobian
-of a least-squares fit ignores.
+of a least-squares fit ignores. The named (best) fit's intervals then include its form
+(``FitConfig.form_profile``, diagnosis.formprofile): refits at the plausible alternatives
+of the choices it ties (the reflex's and the wobbling mass's damping) or picks (the
+reflex's rectification), the envelope of the jackknife intervals of those the data do
+not reject, the point estimate the best-fitting choice.
 
 The fit uses only the calibration part (the first ``1 - held_out_fraction`` of every
 trial); the held-out reduction is 1 - gap(effect) / gap(nominal) on the last part, with
@@ -90,6 +94,9 @@ class FitConfig:
         the one ``armimp estimate`` warns from) on any record and joint makes the gap
         significant whatever the whole-record gap says: a gap confined to part of a
         record is not averaged away, and the two commands never contradict each other.
+    form_profile : widen the named (best) fit's jackknife intervals to their envelope over
+        refits at the plausible alternatives of the choices the fit ties or picks
+        (diagnosis.formprofile: reflex and wobbling-mass damping, rectification).
     """
 
     band_hz: float = 30.0
@@ -109,6 +116,7 @@ class FitConfig:
     noise_floor: str = "coherence"
     model_tolerance: float = 1e-4
     time_gate: bool = True
+    form_profile: bool = True
 
 
 @dataclass
@@ -905,6 +913,8 @@ class EffectFit:
     at_search_bound: list = field(default_factory=list)
     n_evaluations: int = 0
     limb_ci: dict | None = None
+    #: the intervals' form profile (diagnosis.formprofile.profile), None when not profiled
+    form_profile: dict | None = None
 
     def as_dict(self) -> dict:
         return {"effects": [self.effect], "effect": self.effect, "params": self.params,
@@ -916,6 +926,7 @@ class EffectFit:
                 "at_search_bound": self.at_search_bound,
                 "n_evaluations": self.n_evaluations,
                 **({"split": self.split} if getattr(self, "split", None) else {}),
+                **({"form_profile": self.form_profile} if self.form_profile else {}),
                 **({"preferred_over": self.preferred_over}
                    if getattr(self, "preferred_over", None) else {})}
 
@@ -1078,7 +1089,21 @@ def fit_effect(preps, name: str, nominal: dict, cfg: FitConfig = FitConfig(), *,
     fit = EffectFit(name, out_params, ci, limb, obj, g_cal.value, g_held.value,
                     reduction, bound, n_eval, limb_ci=limb_ci)
     fit._problem = (prob, x, lin)
+    fit.nominal_held_out_gap = nom_held
+    if ci is not None:
+        _profile_form(fit, cfg)
     return fit
+
+
+def _profile_form(fit: EffectFit, cfg: FitConfig):
+    """The fit's intervals widened to include its form (diagnosis.formprofile), when
+    ``cfg.form_profile`` and the effect has profiled alternatives."""
+    if not cfg.form_profile or fit.at_search_bound:  # a flagged fit is never named
+        return None
+    from . import formprofile
+    if not formprofile.profiled(fit.effect):
+        return None
+    return formprofile.profile(sys.modules[__name__], fit, cfg)
 
 
 def fit_record(fit: EffectFit) -> dict:
@@ -1116,6 +1141,7 @@ def fit_from_record(preps, d: dict, nominal: dict, cfg: FitConfig = FitConfig())
         fit.split = d.get("split")
     else:
         prob = _Problem(preps, name, d["fixed"], cfg, nominal["solution"].cal_energy)
+    fit.nominal_held_out_gap = nominal["gaps"]["held"].value
     x = np.asarray(d["x"], dtype=float)
     if x.shape != (len(prob.nl),):
         raise ValueError(f"record of {name!r} has {x.size} coordinates, not {len(prob.nl)}")
@@ -1131,6 +1157,8 @@ def add_intervals(fit: EffectFit, cfg: FitConfig = FitConfig()) -> EffectFit:
         fit.intervals, k = _jackknife(prob, x, lin, cfg)
     fit.limb_ci = getattr(prob, "limb_ci", None)
     fit.n_evaluations += k
+    if not vary.is_varying(fit.effect):
+        _profile_form(fit, cfg)
     return fit
 
 

@@ -308,8 +308,18 @@ def named_model_lines(nm: dict) -> list:
     effects = "; ".join(f"{e}: " + ", ".join(
         f"{k} = {_triple(v) if isinstance(v, list) else v}" for k, v in ps.items())
         for e, ps in nm["effects"].items())
-    return [f"Named model ({which}; 95 % intervals in brackets where known): "
-            + ", ".join(limb(k) for k in ("K", "B", "I")) + f"; {effects}.", ""]
+    lines = [f"Named model ({which}; 95 % intervals in brackets where known): "
+             + ", ".join(limb(k) for k in ("K", "B", "I")) + f"; {effects}."]
+    for e, fp in (nm.get("form_profile") or {}).items():
+        grid = "; ".join(f"{k} in {{{', '.join(str(v) for v in vs)}}}"
+                         for k, vs in (fp.get("profiled") or {}).items())
+        kept = [a["choice"] for a in fp.get("alternatives") or [] if a.get("kept")]
+        lines.append(f"{e}'s intervals include its form: refitted at {grid}; the envelope "
+                     f"of the jackknife intervals of {', '.join(kept)} (the choices the data "
+                     f"do not reject); point estimate: {fp.get('best_fitting')}"
+                     + (" (not the catalogue's tied choice)" if fp.get("point_estimate_changed")
+                        else "") + ".")
+    return lines + [""]
 
 
 def _plot_where(report, path: Path) -> None:

@@ -162,13 +162,17 @@ class PositionServo(Experiment):
             best = fits[0]
 
             def jackknife():
-                lf.add_intervals(best, cfg)
+                lf.add_intervals(best, cfg)   # with the form profile (diagnosis.formprofile)
                 return {"intervals": best.intervals, "n": best.n_evaluations,
-                        "limb_ci": best.limb_ci}
+                        "limb_ci": best.limb_ci, "form_profile": best.form_profile}
             ci = _resumable(store, ("limbfit-jackknife", best.effect, repr(cfg)), jackknife,
                             lambda d: d,
                             lambda d: {"intervals": dict(d["intervals"]), "n": int(d["n"]),
-                                       "limb_ci": d.get("limb_ci")})
+                                       "limb_ci": d.get("limb_ci"),
+                                       "form_profile": d.get("form_profile")})
+            if ci.get("form_profile") and best.form_profile is None:  # read back: apply it
+                from .. import formprofile
+                formprofile.apply(lf, best, {**ci["form_profile"], "n_evaluations": 0}, cfg)
             best.intervals, best.n_evaluations = ci["intervals"], int(ci["n"])
             best.limb_ci = ci["limb_ci"]
         pairs = []
@@ -186,6 +190,8 @@ class PositionServo(Experiment):
                             f.n_evaluations, held_out_gap=f.held_out_gap,
                             objective=f.calibration_objective)
             fit.intervals = None if f.intervals is None else {f.effect: f.intervals}
+            # the intervals' form profile (the choices profiled, each refit; formprofile)
+            fit.form_profile = {f.effect: f.form_profile} if f.form_profile else None
             # the limb re-estimated with the effect, with its K, B, I intervals (the
             # jackknife of the best fit)
             fit.model = model_of(f.limb, trials[0].fs, "limbfit with " + f.effect,

@@ -32,6 +32,9 @@ def ranking_row(fit, g0_cal: float, g0_held: float) -> dict:
             **({"widened": fit.widening_notes(), "widenings": fit.widenings,
                 "searched": fit.searched} if getattr(fit, "widenings", None) else {}),
             **({"intervals": fit.intervals} if getattr(fit, "intervals", None) else {}),
+            # which tied choices the intervals were profiled over (diagnosis.formprofile)
+            **({"form_profile": fit.form_profile} if getattr(fit, "form_profile", None)
+               else {}),
             # the held-out split of a varying effect (diagnosis.varying_effects) and why
             **({"split": fit.split} if getattr(fit, "split", None) else {}),
             # a position pair's second effect on held-out data (diagnosis.limbpairs)

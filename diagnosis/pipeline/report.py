@@ -44,7 +44,10 @@ def build(r) -> DiagnosisReport:
         pair_rows = [_row_in_units(row, rho) for row in pair_rows]
         alternatives = [{**a, "params": _effects_in_units(a.get("params") or {}, rho)}
                         for a in alternatives]
-    named = None if chosen is None else named_model(model, fitted, intervals)
+    profile = None if chosen is None else getattr(chosen, "form_profile", None)
+    if r.units and profile:
+        profile = _profile_in_units(profile, r.units["tau_h"] / r.units["theta"])
+    named = None if chosen is None else named_model(model, fitted, intervals, profile)
     return DiagnosisReport(
         named_model=named,
         verdict=r.verdict, named=r.named, summary=r.summary, amplitude=r.amplitude,
@@ -140,7 +143,7 @@ def _triples(values, half=None):
     return rows[0] if len(rows) == 1 else rows
 
 
-def named_model(model: dict, fitted: dict, intervals: dict) -> dict:
+def named_model(model: dict, fitted: dict, intervals: dict, form_profile=None) -> dict:
     """The named model in full (issue 21, item 6): the limb's K, B, I as the named model
     simulates it, each ``[value, low, high]`` (95 %; per joint for several joints; low
     and high None where no interval is known), and every named effect's parameters
@@ -150,7 +153,12 @@ def named_model(model: dict, fitted: dict, intervals: dict) -> dict:
     keeps the limb estimated from the trials (the exoskeleton's fits).
 
     ``model``, ``fitted``, ``intervals``: the report's arm dict and the named fit's
-    parameters and intervals, in the file's units."""
+    parameters and intervals, in the file's units. ``form_profile`` ({effect: record of
+    diagnosis.formprofile.profile}, or None): the intervals are envelopes over refits at
+    the tied choices' alternatives; given as ``form_profile`` {effect: {"profiled",
+    "best_fitting", "point_estimate_changed", "jackknife_intervals", "alternatives",
+    "rule"}}, and a tied choice (a damping) is shown as a value."""
+    from ..formprofile import FORM_GRID
     limb = model.get("with_named_effect")
     refitted = isinstance(limb, dict)
     limb = limb if refitted else model
@@ -160,11 +168,37 @@ def named_model(model: dict, fitted: dict, intervals: dict) -> dict:
            "I": _triples(limb["M_h"], ci.get("M_h")), "effects": {}}
     for effect, params in (fitted or {}).items():
         cis = (intervals or {}).get(effect) or {}
-        choices = cat.get_effect(effect).choices if effect in cat.CATALOGUE else {}
+        choices = dict(cat.get_effect(effect).choices) if effect in cat.CATALOGUE else {}
+        choices.update(FORM_GRID.get(effect, {}))
         out["effects"][effect] = {
             k: v if isinstance(v, (bool, str)) or k in choices else
             [float(v)] + ([float(c) for c in cis[k]] if k in cis else [None, None])
             for k, v in params.items()}
+    if form_profile:
+        out["form_profile"] = {
+            e: {k: rec.get(k) for k in ("profiled", "best_fitting", "point_estimate_changed",
+                                       "jackknife_intervals", "alternatives", "rule",
+                                       "delay_resolution_s")}
+            for e, rec in form_profile.items() if rec}
+    return out
+
+
+def _profile_in_units(profile: dict, rho: float) -> dict:
+    """{effect: form-profile record} with its parameters and intervals in the file's
+    units (impedance-like ones times rho)."""
+    out = {}
+    for e, rec in (profile or {}).items():
+        if not rec:
+            out[e] = rec
+            continue
+        rec = dict(rec)
+        conv = lambda d: _effects_in_units({e: d}, rho)[e] if d else d  # noqa: E731
+        rec["intervals"] = conv(rec.get("intervals"))
+        rec["jackknife_intervals"] = conv(rec.get("jackknife_intervals"))
+        rec["alternatives"] = [{**a, "params": conv(a.get("params")),
+                                "intervals": conv(a.get("intervals"))}
+                               for a in rec.get("alternatives") or []]
+        out[e] = rec
     return out
 
 
@@ -203,6 +237,8 @@ def _row_in_units(row: dict, rho: float) -> dict:
     row["params"] = _effects_in_units(row.get("params") or {}, rho)
     if row.get("intervals"):
         row["intervals"] = _effects_in_units(row["intervals"], rho)
+    if row.get("form_profile"):
+        row["form_profile"] = _profile_in_units(row["form_profile"], rho)
     if row.get("flag_notes") is not None:  # the flags with the values shown beside them
         from ..fitting import format_flags
         row["at_search_bound"] = format_flags(row["flag_notes"], row["params"])

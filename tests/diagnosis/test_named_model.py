@@ -67,6 +67,14 @@ def test_report_json_and_md_carry_the_named_model(report):
     line = next(ln for ln in text.splitlines() if ln.startswith("Named model"))
     assert "the limb re-fitted with the effect" in line
     assert f"K = {report.named_model['K'][0]:.4g} [" in line and "stretch_reflex: gain" in line
+    # the intervals include the form (diagnosis.formprofile): which choices were profiled,
+    # in named_model and in the effect ranking's row, and a line of report.md
+    prof = data["named_model"]["form_profile"]["stretch_reflex"]
+    assert prof["profiled"]["damping"] and prof["profiled"]["rectified"] == [False, True]
+    assert any(a["kept"] for a in prof["alternatives"])
+    row = next(r for r in data["ranking"] if r["effects"] == ["stretch_reflex"])
+    assert row["form_profile"]["stretch_reflex"]["best_fitting"] == prof["best_fitting"]
+    assert any("intervals include its form" in ln for ln in text.splitlines())
 
 
 def test_an_exoskeleton_named_model_keeps_the_estimated_arm_and_says_so():
