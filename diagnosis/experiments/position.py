@@ -127,7 +127,9 @@ class PositionServo(Experiment):
             ``fits`` (fitting.EffectFit, best first, each with ``intervals`` and the
             re-estimated limb as ``model``), ``pairs`` (fitting.EffectFit of two effects,
             best first, each with its second effect's held-out test ``second_test``), ``g0_cal``, ``g0_held``, ``g0_all``,
-            ``significant``, ``threshold``, ``noise_floor``, ``measure``.
+            ``significant``, ``threshold``, ``noise_floor``, ``noise_floor_source``,
+            ``model_tolerance`` (with ``model_tolerance_source`` and
+            ``model_tolerance_per_record``), ``measure``.
         """
         from .. import limbfit as lf
         from ..catalogue import at_search_bound
@@ -202,6 +204,8 @@ class PositionServo(Experiment):
                 "threshold": float(g["all"].threshold(cfg)),
                 "noise_floor": float(g["all"].floor),
                 "noise_floor_source": g["all"].source,
+                # the model tolerance the threshold adds, per record (limbfit)
+                **g["all"].tolerance_report(preps, cfg),
                 "measure": "limbfit: band energy of the torque residual above the noise "
                            "floor (noise_floor_source), relative to the torque energy "
                            "(diagnosis.limbfit)",

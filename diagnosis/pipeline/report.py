@@ -118,6 +118,10 @@ def gap_block(r, chosen, reduction) -> dict:
         # which evidence the floor came from (issue 21 item 1; limbfit.FLOOR_*)
         top["noise_floor"] = fm.get("noise_floor")
         top["noise_floor_source"] = fm.get("noise_floor_source")
+        # the model tolerance the threshold adds, and per record (limbfit: measured)
+        for k in ("model_tolerance", "model_tolerance_source", "model_tolerance_per_record"):
+            if k in fm:
+                top[k] = fm[k]
         top["features"] = features
         top["fit_measure"] = fm
     return top
