@@ -27,7 +27,10 @@ perturbation carries no power, the angle's noise mapped through the nominal impe
 The gap is the remaining energy relative to the torque energy of the band; with a
 recorded theta_ref the servo's angle tracking error is added the same way. A nominal gap
 is significant when it exceeds ``significance_sigma`` standard errors of the Welch
-estimate plus ``floor_margin`` times the floor.
+estimate plus ``floor_margin`` times the floor plus the model tolerance: per record, twice
+what this very pipeline leaves of a noise-free torque of the fitted nominal limb simulated
+from the record's measured angle with accurate derivatives (:func:`_pipeline_tolerance`;
+``FitConfig.model_tolerance`` a number: a constant instead).
 
 Intervals: delete-one-block jackknife over ``n_jackknife`` contiguous blocks of the
 calibration samples (each block's fit refined from the full fit), +- 1.96 standard
