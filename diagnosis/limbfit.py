@@ -27,7 +27,10 @@ perturbation carries no power, the angle's noise mapped through the nominal impe
 The gap is the remaining energy relative to the torque energy of the band; with a
 recorded theta_ref the servo's angle tracking error is added the same way. A nominal gap
 is significant when it exceeds ``significance_sigma`` standard errors of the Welch
-estimate plus ``floor_margin`` times the floor.
+estimate plus ``floor_margin`` times the floor plus the model tolerance: per record, twice
+what this very pipeline leaves of a noise-free torque of the fitted nominal limb simulated
+from the record's measured angle with accurate derivatives (:func:`_pipeline_tolerance`;
+``FitConfig.model_tolerance`` a number: a constant instead).
 
 Intervals: delete-one-block jackknife over ``n_jackknife`` contiguous blocks of the
 calibration samples (each block's fit refined from the full fit), +- 1.96 standard
@@ -84,9 +87,13 @@ class FitConfig:
         floor before issue 21, kept for comparison benches).
     model_tolerance : relative gap (of the band's torque energy) a nominal model may leave
         unexplained whatever the noise: the discrete model's own error (central
-        differences, aliasing of the sampled angle), measured up to 2.6e-5 on labsim's
-        nominal sets with the coherence floor, whose small standard error no longer
-        hides it (bench/bench_noise_floor.py).
+        differences, the analysis low-pass, the offsets), which the coherence floor counts
+        as gap. ``"measured"`` (default): per record, ``tolerance_factor`` times the
+        pipeline's own residual on a noise-free torque of the fitted nominal limb,
+        simulated from the record's measured angle with derivatives of 8th order
+        (:func:`_pipeline_tolerance`); a number: that constant for every record (1e-4 was
+        the constant before; up to 2.6e-5 measured on labsim's nominal sets).
+    tolerance_factor : the measured tolerance's multiple of the noise-free residual.
     name_reduction : held-out reduction an effect needs to be named.
     grid : grid points per nonlinear parameter; refine_starts: grid points refined.
     pairs : try a second effect on top of the best single (diagnosis.limbpairs).
@@ -114,9 +121,10 @@ class FitConfig:
     edge_s: tuple = (1.0, 0.5)
     pairs: bool = True
     noise_floor: str = "coherence"
-    model_tolerance: float = 1e-4
     time_gate: bool = True
     form_profile: bool = True
+    model_tolerance: float | str = "measured"
+    tolerance_factor: float = 2.0
 
 
 @dataclass
@@ -707,23 +715,116 @@ class _Gap:
     se: float             # standard error of ``excess``
     floor: float          # relative noise floor
     source: str = FLOOR_COHERENCE   # the floor source (FLOOR_WHITE if any record used it)
+    tolerance: float = 0.0          # measured model tolerance, summed over records
+    tolerances: tuple = ()          # ... per record (relative to that record's torque)
 
     def significant(self, cfg: FitConfig) -> bool:
         return self.excess > self.threshold(cfg)
 
+    def model_tolerance(self, cfg: FitConfig) -> float:
+        """The model tolerance the threshold adds: the measured one (summed over the
+        records, as the gap is) or ``cfg.model_tolerance`` when that is a number."""
+        return self.tolerance if _measured_tolerance(cfg) else float(cfg.model_tolerance)
+
     def threshold(self, cfg: FitConfig) -> float:
-        """significance_sigma standard errors + floor_margin x floor + model_tolerance."""
+        """significance_sigma standard errors + floor_margin x floor + model tolerance."""
         return (cfg.significance_sigma * self.se + cfg.floor_margin * self.floor
-                + cfg.model_tolerance)
+                + self.model_tolerance(cfg))
+
+    def tolerance_report(self, preps, cfg: FitConfig) -> dict:
+        """The model tolerance used, per record, for report.json."""
+        measured = _measured_tolerance(cfg)
+        per = [{"record": pr.rec.name or f"record {i}",
+                "tolerance": float(self.tolerances[i]) if measured and
+                i < len(self.tolerances) else float(cfg.model_tolerance)}
+               for i, pr in enumerate(preps)]
+        return {"model_tolerance": float(self.model_tolerance(cfg)),
+                "model_tolerance_source": (TOLERANCE_MEASURED.format(cfg.tolerance_factor)
+                                           if measured else TOLERANCE_CONSTANT),
+                "model_tolerance_per_record": per}
+
+
+#: what the report says of the model tolerance (``gap.model_tolerance_source``)
+TOLERANCE_MEASURED = ("measured per record: {:g} x the relative band energy of the "
+                      "pipeline's own residual on a noise-free torque of the fitted nominal "
+                      "limb, simulated from the record's measured angle with 8th-order "
+                      "derivatives (the discrete model's error: central differences, "
+                      "low-pass, offsets)")
+TOLERANCE_CONSTANT = "constant (FitConfig.model_tolerance), the same for every record"
+
+
+def _measured_tolerance(cfg: FitConfig) -> bool:
+    if isinstance(cfg.model_tolerance, str):
+        if cfg.model_tolerance != "measured":
+            raise ValueError(f"FitConfig.model_tolerance = {cfg.model_tolerance!r}: "
+                             f"'measured' or a number")
+        return True
+    return False
+
+
+#: 8th-order central-difference stencils of the first and second derivative (offsets
+#: -4..4, times fs and fs^2): their error at the analysis band's top (30 Hz at 1 kHz) is
+#: below 1e-8 of the derivative, where the pipeline's second-order differences are off by
+#: 0.6 % (velocity) and 0.3 % (acceleration)
+_D1 = np.array([1 / 280, -4 / 105, 1 / 5, -4 / 5, 0.0, 4 / 5, -1 / 5, 4 / 105, -1 / 280])
+_D2 = np.array([-1 / 560, 8 / 315, -1 / 5, 8 / 5, -205 / 72, 8 / 5, -1 / 5, 8 / 315,
+                -1 / 560])
+
+
+def _accurate_derivatives(theta, fs):
+    """Velocity and acceleration of theta (N, n) by the 8th-order stencils (the
+    pipeline's own second-order ones in the 4 samples at each end, which no fit uses)."""
+    omega, alpha = lm.derivatives(theta, fs)
+    omega, alpha = omega.copy(), alpha.copy()
+    N = theta.shape[0]
+    if N > 9:
+        for j in range(theta.shape[1]):
+            # np.convolve flips the kernel: pass it reversed for a correlation
+            omega[4:N - 4, j] = np.convolve(theta[:, j], _D1[::-1], mode="valid") * fs
+            alpha[4:N - 4, j] = np.convolve(theta[:, j], _D2[::-1], mode="valid") * fs * fs
+    return omega, alpha
+
+
+def _clean_residuals(preps, limb: lm.LimbModel):
+    """The pipeline's residual (per record, low-passed, decimated) on a noise-free torque
+    of ``limb`` simulated from each record's own measured angle with accurate
+    derivatives, fitted as the nominal model is (shared K, B, I, offsets per record)."""
+    import copy
+    proxies = []
+    for pr in preps:
+        th = pr.rec.theta
+        om, al = _accurate_derivatives(th, pr.fs)
+        tau = th @ limb.K.T + om @ limb.B.T + al @ limb.I.T
+        q = copy.copy(pr)
+        q.tau_lp = pr.lp(tau)
+        proxies.append(q)
+    return _solve(proxies, [pr.base for pr in preps]).residual
+
+
+def _pipeline_tolerance(pr: _Prepared, mask, cfg: FitConfig, part: str) -> float:
+    """The measured model tolerance of record ``pr`` on ``mask`` [N^2 m^2, summed over
+    joints]: ``tolerance_factor`` x the band energy of its noise-free residual
+    (``pr.clean_residual``, set by :func:`fit_nominal`); 0 without one."""
+    r = getattr(pr, "clean_residual", None)
+    if r is None:
+        return 0.0
+    cache = pr.__dict__.setdefault("_tol_cache", {})
+    key = _mask_key(part, mask)
+    if key not in cache:
+        e, _, _ = _band_energy(r, pr, mask, cfg)
+        cache[key] = cfg.tolerance_factor * max(e, 0.0)
+    return cache[key]
 
 
 def _gap(preps, residuals, angle_residuals, limb0, cfg, part: str) -> _Gap:
     ex = se2 = fl = 0.0
-    sources = []
+    sources, tols = [], []
     for pr, r, ra in zip(preps, residuals, angle_residuals):
         mask = pr.cal if part == "cal" else pr.held if part == "held" else pr.cal | pr.held
         ref_e, _, _ = _band_energy(pr.tau_lp - pr.tau_lp[mask].mean(axis=0), pr, mask, cfg)
         f_tau, f_ang = _floors(pr, mask, cfg, limb0, part)
+        # the torque channel's: the angle residual has no discrete model to err
+        tols.append(_pipeline_tolerance(pr, mask, cfg, part) / ref_e)
         e, s_r, _ = _band_energy(r, pr, mask, cfg)
         ex += (e - f_tau.energy) / ref_e
         # the white floor is analytic: the error is this residual's own (as before the
@@ -740,7 +841,7 @@ def _gap(preps, residuals, angle_residuals, limb0, cfg, part: str) -> _Gap:
             fl += f_ang.energy / th_e
             sources.append(f_ang.source)
     source = FLOOR_WHITE if FLOOR_WHITE in sources else FLOOR_COHERENCE
-    return _Gap(max(ex, 0.0), ex, math.sqrt(se2), fl, source)
+    return _Gap(max(ex, 0.0), ex, math.sqrt(se2), fl, source, float(sum(tols)), tuple(tols))
 
 
 def _angle_residual(pr: _Prepared, params: dict | None):
@@ -1021,9 +1122,13 @@ def fit_nominal(preps, cfg: FitConfig = FitConfig()) -> dict:
     sol = _solve(preps, [pr.base for pr in preps])
     limb = _limb_from(sol.coef, preps[0].n)
     ang = [_angle_residual(pr, None) for pr in preps]
-    for pr, r, a in zip(preps, sol.residual, ang):  # the floors are read from these
+    clean = (_clean_residuals(preps, limb) if _measured_tolerance(cfg)
+             else [None] * len(preps))
+    for pr, r, a, c in zip(preps, sol.residual, ang, clean):  # the floors are read from these
         pr.nominal_residual = (r, a)
+        pr.clean_residual = c   # the measured model tolerance from this
         pr.__dict__.pop("_floor_cache", None)
+        pr.__dict__.pop("_tol_cache", None)
     gaps = {part: _gap(preps, sol.residual, ang, limb, cfg, part)
             for part in ("cal", "held", "all")}
     return {"limb": limb, "solution": sol, "gaps": gaps}
@@ -1282,6 +1387,7 @@ def diagnose_position(records, cfg: FitConfig = FitConfig()) -> PositionDiagnosi
              "significance_threshold": threshold, "noise_floor": g["all"].floor,
              "noise_floor_source": g["all"].source,
              "changing_in_time": changing,
+             **g["all"].tolerance_report(preps, cfg),
              "named_held_out_reduction": (pair.held_out_reduction if pair is not None
                                           else best.held_out_reduction if best else None)},
         elapsed_s=time.perf_counter() - t0,

@@ -196,6 +196,12 @@ def markdown(report) -> str:
     if g.get("noise_floor_source"):
         lines += [f"Noise floor ({_fmt(g.get('noise_floor'))} of the torque energy): "
                   f"{g['noise_floor_source']}.", ""]
+    if g.get("model_tolerance_source"):
+        per = g.get("model_tolerance_per_record") or []
+        lines += [f"Model tolerance ({_fmt(g.get('model_tolerance'))} of the torque energy, "
+                  f"in the threshold): {g['model_tolerance_source']}"
+                  + (": " + ", ".join(f"{x['record']} {_fmt(x['tolerance'])}" for x in per)
+                     if per else "") + ".", ""]
     feat = g.get("features")
     if feat:
         lines += [f"Feature gap (another measure: the where stage's, from the FRF features "

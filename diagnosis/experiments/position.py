@@ -127,7 +127,9 @@ class PositionServo(Experiment):
             ``fits`` (fitting.EffectFit, best first, each with ``intervals`` and the
             re-estimated limb as ``model``), ``pairs`` (fitting.EffectFit of two effects,
             best first, each with its second effect's held-out test ``second_test``), ``g0_cal``, ``g0_held``, ``g0_all``,
-            ``significant``, ``threshold``, ``noise_floor``, ``measure``, and
+            ``significant``, ``threshold``, ``noise_floor``, ``noise_floor_source``,
+            ``model_tolerance`` (with ``model_tolerance_source`` and
+            ``model_tolerance_per_record``), ``changing_in_time``, ``measure``, and
             ``alternatives``: a function of the named fit giving its alternatives, each
             judged on the named fit's held-out split (diagnosis.limbties.alternatives;
             computed once per named fit, kept in the resume store).
@@ -232,6 +234,8 @@ class PositionServo(Experiment):
                 "noise_floor": float(g["all"].floor),
                 "noise_floor_source": g["all"].source,
                 "changing_in_time": changing,
+                # the model tolerance the threshold adds, per record (limbfit)
+                **g["all"].tolerance_report(preps, cfg),
                 "measure": "limbfit: band energy of the torque residual above the noise "
                            "floor (noise_floor_source), relative to the torque energy "
                            "(diagnosis.limbfit)",

@@ -127,6 +127,10 @@ def gap_block(r, chosen, reduction) -> dict:
         top["noise_floor_source"] = fm.get("noise_floor_source")
         # the records the shared time-variation test made significant (limbfit.time_gate)
         top["changing_in_time"] = fm.get("changing_in_time", [])
+        # the model tolerance the threshold adds, and per record (limbfit: measured)
+        for k in ("model_tolerance", "model_tolerance_source", "model_tolerance_per_record"):
+            if k in fm:
+                top[k] = fm[k]
         top["features"] = features
         top["fit_measure"] = fm
     return top

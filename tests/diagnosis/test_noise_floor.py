@@ -134,7 +134,14 @@ def test_the_example_ankle_relaxed_1_diagnosis_reports_no_gap_and_its_floor(tmp_
     assert report.verdict == "no significant gap", report.summary
     doc = json.loads((tmp_path / "out" / "report.json").read_text())
     assert doc["gap"]["noise_floor_source"].startswith("welch non-coherent")
-    assert "Noise floor" in (tmp_path / "out" / "report.md").read_text()
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "Noise floor" in md
+    # the model tolerance the threshold adds, measured per record (not the constant 1e-4)
+    per = doc["gap"]["model_tolerance_per_record"]
+    assert [x["record"] for x in per] == ["relaxed_1"], per
+    assert 0 < per[0]["tolerance"] == doc["gap"]["model_tolerance"] < 1e-4
+    assert doc["gap"]["model_tolerance_source"].startswith("measured per record")
+    assert "Model tolerance" in md and "relaxed_1" in md
 
 
 def _labsim_varying(kind, seed, seconds=40.0):
