@@ -41,7 +41,7 @@ import trialformat as tf  # noqa: E402
 from diagnosis import limbfit as lf  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchio import wilson, write_results  # noqa: E402
+from benchio import wilson, write_blind, write_results  # noqa: E402
 
 EFFECTS = ("stretch_reflex", "wobbling_mass", "channel_delay", "torque_sensor_lag")
 CONDITIONS = [("stretch_reflex", 0.6), ("stretch_reflex", 0.8), ("stretch_reflex", 1.0),
@@ -83,11 +83,7 @@ def one(effect, damping, seed, folder, representation, duration):
     spec = make_spec(effect, damping, seed, duration)
     rec = labsim.simulate(spec)
     truth = truth_of(rec, effect)
-    sub = folder / f"{effect}_{damping:g}_{seed}"
-    sub.mkdir(parents=True, exist_ok=True)
-    labsim.write(rec, sub, "rec_0000", representation, truth_fs=None)
-    for p in sub.glob("*truth*"):  # blind: the diagnosis never sees the truth
-        p.rename(folder / f"{sub.name}.{p.name}")
+    sub = write_blind(rec, folder, f"{effect}_{damping:g}_{seed}", representation)
     t0 = time.perf_counter()
     trials = tf.read_trials(sub)
     d = lf.diagnose_position(trials, lf.FitConfig(effects=EFFECTS, pairs=False))

@@ -41,7 +41,7 @@ from diagnosis import limbpairs as lp  # noqa: E402
 from diagnosis import varying_effects as vary  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchio import wilson  # noqa: E402
+from benchio import wilson, write_blind  # noqa: E402
 
 #: labsim kind -> the catalogue effects that name its truth (None: stationary)
 EXPECTED = {
@@ -66,11 +66,7 @@ def one(kind: str, seed: int, folder: Path, representation: str) -> dict:
     spec = dataclasses.replace(spec, record_reference=False, perturbation=dataclasses.replace(
         spec.perturbation, kind="noise"))
     rec = labsim.simulate(spec)
-    sub = folder / f"{kind.replace('+', '_')}_{seed}"
-    sub.mkdir(parents=True, exist_ok=True)
-    labsim.write(rec, sub, "rec_0000", representation, truth_fs=None)
-    for p in sub.glob("*truth*"):  # blind: the diagnosis never sees the truth
-        p.rename(folder / f"{sub.name}.{p.name}")
+    sub = write_blind(rec, folder, f"{kind.replace('+', '_')}_{seed}", representation)
     t0 = time.perf_counter()
     trials = tf.read_trials(sub)
     d = lf.diagnose_position(trials)

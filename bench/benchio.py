@@ -46,3 +46,16 @@ def wilson(k: int, n: int, z: float = 1.96):
     c = (p + z * z / (2 * n)) / (1 + z * z / n)
     h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
     return [max(0.0, c - h), min(1.0, c + h)]
+
+
+def write_blind(rec, folder: Path, name: str, representation: str) -> Path:
+    """Write labsim recording ``rec`` into ``folder / name`` in ``representation`` with
+    its truth files moved beside that folder (``name.*truth*``), so that a diagnosis of
+    the folder never sees the truth. Returns the folder to read."""
+    import labsim
+    sub = Path(folder) / name
+    sub.mkdir(parents=True, exist_ok=True)
+    labsim.write(rec, sub, "rec_0000", representation, truth_fs=None)
+    for p in sub.glob("*truth*"):  # blind: the diagnosis never sees the truth
+        p.rename(Path(folder) / f"{sub.name}.{p.name}")
+    return sub
