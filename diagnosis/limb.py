@@ -46,8 +46,9 @@ w^2/(s^2 + 2 z w s + w^2), w = 2 pi f_s, a stiff (load-independent) servo with a
 closed-loop bandwidth.
 
 Discretisation (fs the sampling rate): derivatives by second-order central differences
-(numpy.gradient), continuous filters by the bilinear transform pre-warped at their
-characteristic frequency, fractional delays by linear interpolation between samples.
+(numpy.gradient), second-order filters by the bilinear transform pre-warped at
+their characteristic frequency, the sensor's first-order low-pass by its first-order-hold
+equivalent (any T >= 0), fractional delays by linear interpolation between samples.
 Filters start from rest, except the sensor low-pass, which starts at the first torque.
 Everything is vectorised (scipy.signal.lfilter along time): a 60 s, 1 kHz trial takes
 milliseconds.
@@ -223,14 +224,24 @@ def second_order_lowpass(frequency_hz: float, damping: float, fs: float, *,
 
 @_designed_once
 def first_order_lowpass(time_constant_s: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
-    """Digital (b, a) of 1/(T s + 1) by the bilinear transform pre-warped at 1/(2 pi T)."""
-    if not time_constant_s > 0:
-        raise ValueError(f"time_constant_s must be > 0; got {time_constant_s!r}")
-    wc = 1.0 / time_constant_s
-    if wc >= math.pi * fs:
+    """Digital (b, a) of 1/(T s + 1): the exact response to an input linear between
+    samples (first-order-hold equivalent, scipy.signal.cont2discrete ``"foh"``).
+
+    With r = 1/(T fs), a = exp(-r) and g = (1 - a)/r:
+    y[k] = a y[k-1] + (1 - g) x[k] + (g - a) x[k-1]. Unit DC gain; defined for every
+    T > 0 (corners above the Nyquist frequency included) and continuous in T, tending to
+    the identity as T -> 0; T == 0 is the identity itself, b = a = [1].
+
+    Raises ValueError for T < 0 or a non-finite T.
+    """
+    if time_constant_s == 0:
         return np.array([1.0]), np.array([1.0])
-    w = 2 * fs * math.tan(wc / (2 * fs))
-    return signal.bilinear([w], [1.0, w], fs)
+    if not (time_constant_s > 0 and math.isfinite(time_constant_s)):
+        raise ValueError(f"time_constant_s must be >= 0 and finite; got {time_constant_s!r}")
+    r = 1.0 / (time_constant_s * fs)
+    a = math.exp(-r)
+    g = -math.expm1(-r) / r  # (1 - a)/r, accurate for small r
+    return np.array([1.0 - g, g - a]), np.array([1.0, -a])
 
 
 def fractional_delay(x: np.ndarray, delay_samples: float) -> np.ndarray:
@@ -285,8 +296,9 @@ def channel_apply(tau: np.ndarray, fs: float, effects: dict) -> np.ndarray:
     if "torque_sensor_lag" in effects:
         p = effect_params("torque_sensor_lag", effects["torque_sensor_lag"])
         b, a = first_order_lowpass(float(p["time_constant_s"]), fs)
-        zi = signal.lfilter_zi(b, a)[:, None] * out[:1]
-        out, _ = signal.lfilter(b, a, out, axis=0, zi=zi)
+        if len(a) > 1:  # T == 0 is the identity (lfilter_zi needs a filter state)
+            zi = signal.lfilter_zi(b, a)[:, None] * out[:1]
+            out, _ = signal.lfilter(b, a, out, axis=0, zi=zi)
     if "channel_delay" in effects:
         p = effect_params("channel_delay", effects["channel_delay"])
         d = float(p["samples"]) if "samples" in p else float(p["delay_s"]) * fs

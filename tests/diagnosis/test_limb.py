@@ -128,3 +128,36 @@ def test_fractional_delay_shifts_a_ramp_exactly_and_holds_the_edges():
     np.testing.assert_allclose(fractional_delay(x, 1e-9)[:, 0], x[:, 0], atol=1e-8)
     np.testing.assert_allclose(fractional_delay(x, -2.5)[:17, 0], x[:17, 0] + 2.5)
     assert fractional_delay(x, 0.3)[0, 0] == 0.0 and fractional_delay(x, -2.5)[-1, 0] == 19.0
+
+
+def test_sensor_lag_is_continuous_down_to_tiny_time_constants():
+    """A time constant below 1/(pi fs) (corner above Nyquist) used to become the identity
+    and then crash channel_apply in lfilter_zi; now the response is a smooth function of
+    T that tends to the identity, and T == 0 is the identity exactly."""
+    from diagnosis.limb import channel_apply, first_order_lowpass
+    from scipy import signal as sps
+
+    rng = np.random.default_rng(3)
+    tau = np.cumsum(rng.standard_normal((2000, 2)), axis=0)
+    prev = None
+    for T in (2e-3, 4e-4, 3.2e-4, 3.1e-4, 1e-4, 5e-5, 1e-6):
+        out = channel_apply(tau, FS, {"torque_sensor_lag": {"time_constant_s": T}})
+        assert np.all(np.isfinite(out)), T
+        step = np.abs(out - tau).max()
+        if prev is not None:
+            assert step < prev, T  # monotonically closer to the identity as T shrinks
+        prev = step
+        b, a = first_order_lowpass(T, FS)
+        _, h = sps.freqz(b, a, [10.0], fs=FS)
+        analytic = 1 / (2j * np.pi * 10.0 * T + 1)
+        assert abs(h[0] / analytic - 1) < 1e-3, T
+    assert prev < 1e-3 * np.abs(tau).max()
+    # continuous across the old switch at 1/(pi fs)
+    edge = 1 / (np.pi * FS)
+    lo = channel_apply(tau, FS, {"torque_sensor_lag": {"time_constant_s": edge * 0.999}})
+    hi = channel_apply(tau, FS, {"torque_sensor_lag": {"time_constant_s": edge * 1.001}})
+    assert np.abs(hi - lo).max() < 1e-3 * np.abs(tau).max()
+    np.testing.assert_array_equal(
+        channel_apply(tau, FS, {"torque_sensor_lag": {"time_constant_s": 0.0}}), tau)
+    with pytest.raises(ValueError, match="time_constant_s"):
+        first_order_lowpass(-1e-3, FS)
