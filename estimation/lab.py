@@ -21,6 +21,7 @@ Works for any number of joints n >= 1.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, replace
 from types import SimpleNamespace
 
@@ -407,7 +408,8 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
                                detrend="constant", **welch)
     found = data_band(whole, usable, options)
     band, band_source = _band(usable, options, fs, method, found)
-    _check_band_bins(band, band_source, welch, fs)
+    _check_band_bins(band, band_source, welch, fs,
+                     above=lambda: _band_above_movement(whole, usable, options, welch, fs))
     n_time, time_note = time_segments(usable, band, options)  # refused before the fits
     est = replace(whole, band_hz=band)
     sampling = _switch(options.sampling_correction, left_limit_sampled(usable))
@@ -589,7 +591,7 @@ def perturbation_psd(trials, options, method):
     return f, out
 
 
-def data_band(estimate, trials, options) -> dict | None:
+def data_band(estimate, trials, options, *, above_hz: float = 0.0) -> dict | None:
     """The band the data support: where the perturbation has power and coherence is high.
 
     Bins qualify where the perturbation's PSD (:func:`perturbation_psd`; the angle for the
@@ -600,6 +602,10 @@ def data_band(estimate, trials, options) -> dict | None:
     a chance coherence of 0.9 needs far fewer averages than a Welch estimate has); bins
     inside with low coherence (a notch) stay in and are said (``coherent_fraction``).
 
+    ``above_hz`` > 0: only the bins above it count (the peak and the power are those of
+    the spectrum above it): the perturbation's band above a slow movement that dominates
+    the angle's spectrum.
+
     Returns ``{"band_hz": (lo, hi), "coherent_fraction", "text", ...}`` or None when no
     run qualifies.
     """
@@ -609,10 +615,13 @@ def data_band(estimate, trials, options) -> dict | None:
     if len(fp) != len(f):
         return None
     c = np.min(np.stack([estimate.coherence_Z[:, i, i] for i in range(n)]), axis=0)
-    power = psd >= psd[1:].max() * 10 ** (-options.band_power_db / 10)
-    power[0] = False
+    first_bin = max(1, int(np.searchsorted(f, above_hz, side="right")))
+    if first_bin >= len(f):
+        return None
+    power = psd >= psd[first_bin:].max() * 10 ** (-options.band_power_db / 10)
+    power[:first_bin] = False
     # the excited range: the contiguous stretch of power around the PSD's peak
-    peak = 1 + int(np.argmax(psd[1:]))
+    peak = first_bin + int(np.argmax(psd[first_bin:]))
     first, stop = next((a, b) for a, b in runs(power) if a <= peak < b)
     ok = np.zeros(len(f), bool)
     ok[first:stop] = c[first:stop] >= options.band_coherence_min
@@ -635,10 +644,22 @@ def data_band(estimate, trials, options) -> dict | None:
 MIN_BAND_BINS = 3  # M, B, K: three real unknowns, two real equations per bin; CIs need more
 
 
-def _check_band_bins(band, band_source, welch, fs) -> None:
+def _up_to_grid(x: float, df: float) -> str:
+    """``x`` [Hz] rounded up to the fewest decimals that keep it within df/4 of x: as a
+    band edge it holds the grid frequency at x (bins are lo < f <= hi) and no other."""
+    decimals = max(0, int(np.ceil(-np.log10(df / 4)))) if df > 0 else 6
+    up = math.ceil(x * 10 ** decimals) / 10 ** decimals
+    return f"{up:.{decimals}f}"
+
+
+def _check_band_bins(band, band_source, welch, fs, *, above=None) -> None:
     """Refuse a fit band that holds fewer than MIN_BAND_BINS frequencies of the Welch grid.
 
-    Names the option (or metadata key) that set the band and the values that would work.
+    Names the option (or metadata key) that set the band and values that work when
+    followed: the band's top widened to its MIN_BAND_BINS-th frequency (rounded up, never
+    down: :func:`_up_to_grid`), and first, when ``above`` (called only to refuse)
+    returns a band (the data band above a slow movement, :func:`_band_above_movement`),
+    that band.
     """
     df = fs / welch["nfft"]
     lo, hi = band
@@ -647,15 +668,64 @@ def _check_band_bins(band, band_source, welch, fs) -> None:
         return
     setter = (f"--band {lo:g} {hi:g}" if band_source == "set by the user"
               else f"the band {lo:g}-{hi:g} Hz ({band_source})")
-    need_hi = lo + MIN_BAND_BINS * df
-    need_nfft = int(np.ceil(MIN_BAND_BINS * fs / (hi - lo)))
+    first = int(np.floor(lo / df)) + 1  # the first grid frequency above lo
+    need_hi = min((first + MIN_BAND_BINS - 1) * df, fs / 2)
+    need_nfft = int(np.ceil(MIN_BAND_BINS * fs / (hi - lo))) if hi > lo else None
     seg = (f"--nperseg {welch['nperseg']}" if welch["nfft"] == welch["nperseg"]
            else f"--nfft {welch['nfft']}")
+    lead = ""
+    above = above() if above is not None else None
+    if above is not None:
+        a_lo, a_hi = above["band_hz"]
+        lead = (f"the joint moves slowly beyond its perturbation ({above['moving']}): "
+                f"below {above['above_hz']:g} Hz the angle's spectrum is that movement's, "
+                f"not the perturbation's; the perturbation's own band above it is --band {_up_to_grid(a_lo, df)} "
+                f"{_up_to_grid(a_hi, df)} ({above['text']}): use it; or ")
+    longer = (f", or use --nperseg (and --nfft) >= {need_nfft} with trials at least that "
+              f"long" if need_nfft else "")
     raise EstimationError(
         f"{setter} holds {count} frequencies of the Welch grid ({seg} at fs={fs:g} Hz: one "
-        f"every {df:.4g} Hz); the fit needs at least {MIN_BAND_BINS}: widen the band to "
-        f"--band {lo:g} {need_hi:.4g} or more, or use --nperseg (and --nfft) >= {need_nfft} "
-        f"with trials at least that long")
+        f"every {df:.4g} Hz); the fit needs at least {MIN_BAND_BINS}: {lead}widen the band "
+        f"to --band {lo:g} {_up_to_grid(need_hi, df)} or more{longer}")
+
+
+def _band_above_movement(whole, trials, options, welch, fs) -> dict | None:
+    """The data band (:func:`data_band`) above the slow part of the angle
+    (trialformat.scheduling.SLOW_CUTOFF_HZ) when a trial's perturbed joint moves beyond
+    its perturbation (scheduling.MOVING_RATIO) and that band holds MIN_BAND_BINS
+    frequencies; else None. With a ``"moving"`` text and ``"above_hz"``."""
+    from trialformat.scheduling import MOVING_RATIO, SLOW_CUTOFF_HZ, spread
+    if not SLOW_CUTOFF_HZ < fs / 2:
+        return None
+    moving = None
+    for t in trials:
+        if t.theta is None:
+            continue
+        for k in ([t.perturbed_dof - 1] if t.perturbed_dof else range(t.n_dof)):
+            x = np.asarray(t.theta[:, k], dtype=float)
+            if x.size < 3 or not np.all(np.isfinite(x)):
+                continue
+            try:
+                span, noise = spread(x, fs)
+            except ValueError:
+                continue
+            if span > MOVING_RATIO * noise:
+                moving = (f"{t.name}: theta[{k + 1}]'s part below {SLOW_CUTOFF_HZ:g} Hz "
+                          f"spans {span:.3g} rad, {span / noise:.3g} times the rest's std"
+                          if noise > 0 else f"{t.name}: theta[{k + 1}] moves")
+                break
+        if moving:
+            break
+    if moving is None:
+        return None
+    found = data_band(whole, trials, options, above_hz=SLOW_CUTOFF_HZ)
+    if found is None:
+        return None
+    df = fs / welch["nfft"]
+    grid = np.arange(welch["nfft"] // 2 + 1) * df
+    if np.count_nonzero(band_mask(grid, found["band_hz"])) < MIN_BAND_BINS:
+        return None
+    return {**found, "moving": moving, "above_hz": SLOW_CUTOFF_HZ}
 
 
 def _excited_band(trials, options, method):

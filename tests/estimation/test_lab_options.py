@@ -63,3 +63,51 @@ def test_filled_keys_are_one_plain_line(tmp_path, capsys):
 def test_missing_folder_says_so(tmp_path, capsys):
     assert main(["estimate", str(tmp_path / "nonexistent")]) == 1
     assert "nonexistent: no such file or folder" in capsys.readouterr().err
+
+
+def _slowly_moving_trial(folder):
+    """60 s at 1 kHz: the joint moves +-0.3 rad at 0.05 Hz, a 3 mrad 1-40 Hz position
+    perturbation on top, tau_h = K theta + B theta' + I theta'' (+ a little noise), no
+    declared cutoff: the angle's spectrum is the movement's, so no coherent stretch of the
+    perturbation is found and the band falls back to the 20 dB top of the movement."""
+    import numpy as np
+    from scipy import signal as sps
+    fs, n = 1000.0, 60_000
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(0)
+    d = sps.sosfilt(sps.butter(4, [1.0, 40.0], btype="bandpass", fs=fs, output="sos"),
+                    rng.standard_normal(n))
+    th = 0.3 * np.sin(2 * np.pi * 0.05 * t) + 0.003 * d / d.std()
+    w = np.gradient(th, 1 / fs)
+    tau = 80.0 * th + 1.2 * w + 0.011 * np.gradient(w, 1 / fs) + 0.05 * rng.standard_normal(n)
+    meta = tf.default_metadata(1)
+    meta["perturbation"] = {"kind": "position", "seed": 0}
+    tf.write_trial(folder / "slow", tf.Trial(meta=meta, t=t, theta=th[:, None],
+                                             tau_h=tau[:, None], name="slow"))
+
+
+def test_moving_joint_band_advice_works_when_followed(tmp_path, capsys):
+    """The refusal of a slowly moving joint's too-narrow band used to advise
+    '--band 0 0.3662', which (rounded down below the third bin, 0.36621 Hz) was refused
+    again with the same advice; now it names the perturbation's band above the movement,
+    and both that band and the widened one are accepted when given back."""
+    _slowly_moving_trial(tmp_path)
+    assert main(["estimate", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert "holds 2 frequencies" in err and "moves slowly beyond its perturbation" in err
+    own = re.search(r"own band above it is --band (\S+) (\S+) ", err)
+    widened = re.search(r"widen the band to --band (\S+) (\S+) or more", err)
+    assert own and widened, err
+    lo, hi = float(own[1]), float(own[2])
+    assert 0.4 < lo < 1.0 and 30.0 < hi < 100.0, err
+    out = tmp_path / "res.json"
+    assert main(["estimate", str(tmp_path), "--band", own[1], own[2],
+                 "--json", str(out)]) == 0, capsys.readouterr().err
+    p = json.loads(out.read_text())[0]["parameters"]
+    assert p["K"]["value"][0][0] == pytest.approx(80.0, rel=0.05)
+    assert p["B"]["value"][0][0] == pytest.approx(1.2, rel=0.05)
+    assert p["M"]["value"][0][0] == pytest.approx(0.011, rel=0.05)
+    capsys.readouterr()
+    # the fallback, too, is accepted (not refused with the same advice again)
+    assert main(["estimate", str(tmp_path), "--band", widened[1], widened[2]]) == 0, \
+        capsys.readouterr().err
