@@ -932,13 +932,68 @@ def check_trial(trial: Trial, where, *, min_samples: int = MIN_SAMPLES) -> None:
         if arr.shape != (t.shape[0], n):
             raise TrialFormatError(f"{where}: signal {s} has shape {arr.shape}, expected "
                                    f"({t.shape[0]}, {n})")
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            row, col = np.argwhere(bad)[0]
-            raise TrialFormatError(f"{where}: non-finite or blank value {_num(arr[row, col])} in "
-                                   f"column '{s}[{col + 1}]' at data row {row + 1}")
+    gaps = [(f"{s}[{col + 1}]", trial.signal(s)[:, col]) for s in trial.signals()
+            for col in range(n) if not np.all(np.isfinite(trial.signal(s)[:, col]))]
+    if gaps:
+        raise TrialFormatError(_gaps_message(gaps, t, fs, where, min_samples))
     _check_time(t, fs, where, "fs" in (trial.filled_defaults or []))
     _check_perturbation(trial, where)
+
+
+#: gaps listed per column in the non-finite refusal (the rest counted)
+MAX_GAPS_SAID = 4
+
+
+def _rows(a: int, b: int) -> str:
+    """Data rows a..b (1-based, inclusive) as text."""
+    return f"row {a}" if a == b else f"rows {a}-{b}"
+
+
+def _gaps_message(gaps, t, fs, where, min_samples) -> str:
+    """The refusal of non-finite signal values: the first one (column and data row, as
+    before), every column's runs of non-finite rows (data rows 1-based, with their time),
+    the finite stretches left and what to do (cut the trial there; nothing is filled in).
+
+    ``gaps``: [(column, values (N,))] of the columns holding a non-finite value."""
+    n_rows = len(t)
+    t_of = (lambda i: i / fs) if fs and np.isfinite(fs) and fs > 0 else (lambda i: float(t[i]))
+    any_bad = np.zeros(n_rows, bool)
+    first = None
+    parts = []
+    for name, x in gaps:
+        bad = ~np.isfinite(x)
+        any_bad |= bad
+        row = int(np.argmax(bad))
+        if first is None or row < first[1]:
+            first = (name, row, x[row])
+        m = np.concatenate([[False], bad, [False]]).astype(int)
+        starts, stops = np.flatnonzero(np.diff(m) == 1), np.flatnonzero(np.diff(m) == -1)
+        said = [f"{_rows(a + 1, b)} (t = {t_of(a):.6g}"
+                + (f"-{t_of(b - 1):.6g}" if b - 1 > a else "") + " s)"
+                for a, b in zip(starts[:MAX_GAPS_SAID], stops[:MAX_GAPS_SAID])]
+        more = (f" and {len(starts) - MAX_GAPS_SAID} more gap(s)"
+                if len(starts) > MAX_GAPS_SAID else "")
+        parts.append(f"'{name}' {', '.join(said)}{more}: {int(bad.sum())} row(s)")
+    name, row, value = first
+    m = np.concatenate([[False], ~any_bad, [False]]).astype(int)
+    starts, stops = np.flatnonzero(np.diff(m) == 1), np.flatnonzero(np.diff(m) == -1)
+    if starts.size:
+        k = int(np.argmax(stops - starts))
+        a, b = int(starts[k]), int(stops[k])
+        longest = (f"longest: {_rows(a + 1, b)}, {b - a} samples"
+                   + (f", {(b - a) / fs:.4g} s" if fs and fs > 0 else ""))
+        if b - a < min_samples:
+            longest += (f", shorter than one spectral segment ({min_samples} samples): no "
+                        f"cut is long enough, record the trial again")
+    else:
+        longest = "none: no row is finite in every column; record the trial again"
+    return (f"{where}: non-finite or blank value {_num(value)} in column '{name}' at data "
+            f"row {row + 1}; non-finite (NaN, blank or inf) values, rows counted from 1 at "
+            f"the first data row: {'; '.join(parts)}. The estimate needs a finite value in "
+            f"every row of the declared columns and fills no gap (nothing is interpolated "
+            f"or dropped): cut the trial at the gaps and write each finite stretch as a "
+            f"trial of its own, t restarting at 0 ({longest}), or repair the recording at "
+            f"its source")
 
 
 def _check_time(t: np.ndarray, fs: float, where, fs_filled: bool = False) -> None:

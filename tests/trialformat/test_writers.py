@@ -370,6 +370,48 @@ def test_bad_cell_names_file_row_column(tmp_path, cell, match):
     assert "bad.csv" in str(info.value)
 
 
+def test_nan_gaps_name_file_columns_rows_and_a_way_forward(tmp_path):
+    """NaN gaps used to be refused at their first cell only, with no way forward: now
+    every gap of every column (data rows and t), the longest finite stretch and what to do
+    (cut there; nothing is interpolated) are named."""
+    path = _plain(tmp_path, n=20_000)
+    header = path.read_text().splitlines()[0].split(",")
+    c_theta, c_tau = header.index("theta[2]"), header.index("tau_h[1]")
+
+    def put(lines):
+        for row, col, cell in [*((r, c_tau, "NaN") for r in range(100, 111)),
+                               *((r, c_theta, "") for r in (3000, 3001)),
+                               (6000, c_theta, "nan")]:
+            cells = lines[row].split(",")
+            cells[col] = cell
+            lines[row] = ",".join(cells)
+    _edit(path, put)
+    with pytest.raises(TrialFormatError) as info:
+        tf.read_trial(path)
+    msg = str(info.value)
+    assert "bad.csv" in msg
+    assert "column 'tau_h[1]' at data row 100" in msg  # the first, as before
+    assert "'tau_h[1]' rows 100-110 (t = 0.099-0.109 s): 11 row(s)" in msg
+    assert "'theta[2]' rows 3000-3001 (t = 2.999-3 s), row 6000 (t = 5.999 s): 3 row(s)" \
+        in msg
+    assert "longest: rows 6001-20000, 14000 samples, 14 s" in msg
+    assert "cut the trial at the gaps" in msg and "nothing is interpolated" in msg
+    assert "record the trial again" not in msg  # a long enough stretch is left
+
+
+def test_nan_gaps_leaving_no_long_stretch_say_record_again(tmp_path):
+    path = _plain(tmp_path)
+
+    def put(lines):
+        cells = lines[N // 2].split(",")
+        cells[3] = "NaN"
+        lines[N // 2] = ",".join(cells)
+    _edit(path, put)
+    with pytest.raises(TrialFormatError, match=r"shorter than one spectral segment .*no cut "
+                                               r"is long enough, record the trial again"):
+        tf.read_trial(path)
+
+
 def test_decimal_comma_gets_a_hint(tmp_path):
     stem = tmp_path / "bad"
     pd.DataFrame(values()).to_csv(stem.with_suffix(".csv"), index=False, sep=";", decimal=",")
