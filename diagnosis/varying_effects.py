@@ -148,7 +148,12 @@ def _switch_indicator(pr):
             if v > best:
                 best, thr = v, 0.5 * (srt[i - 1] + srt[i])
         ind_w = (ks > thr).astype(float)
-        ind_w[~ok] = 0.0
+        # a window left out of the fit (the record's filter-trimmed ends, a gap) holds
+        # the level of the nearest window estimated: set to the low level, a record that
+        # starts (or ends) high counted one switch too many and its basis was low there
+        have = np.flatnonzero(ok)
+        for i in np.flatnonzero(~ok):
+            ind_w[i] = ind_w[have[np.argmin(np.abs(have - i))]]
     ind_d = np.zeros(pr.Nd)
     for s, v in zip(starts, ind_w):
         ind_d[s:s + w] = v
