@@ -91,6 +91,11 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
     # the rule estimate and figures follow too, said in one line of each report
     options["grouping"] = describe(trial_sets(trials))
     grouping = options["grouping"]
+    from estimation.grouping import near_duplicate_labels
+    label_note = near_duplicate_labels(trials)
+    if label_note:
+        import warnings
+        warnings.warn(label_note, stacklevel=2)
     if len(groups) == 1:
         trials = next(iter(groups.values()))
         return run(DiagnosisRun(source=source, out_dir=out_dir, trials=trials,

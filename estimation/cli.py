@@ -328,6 +328,16 @@ def grouping_line(trials, options) -> str:
     return describe(trial_sets(trials, pool=options.pool))
 
 
+def print_label_note(trials) -> None:
+    """One ``note: ...`` line on stderr (as the readers' notes) naming condition labels
+    that differ only by case or surrounding spaces
+    (estimation.grouping.near_duplicate_labels), if any."""
+    from .grouping import near_duplicate_labels
+    note = near_duplicate_labels(trials)
+    if note:
+        print(f"note: {note}", file=sys.stderr)
+
+
 def _report_failures(failures, results) -> int:
     """Print one line per failed condition; exit status 1 when any failed."""
     from .errors import EstimationError
@@ -353,6 +363,7 @@ def run_estimate(args) -> int:
     status = _report_failures(failures, results)
     grouping = grouping_line(trials, options)
     print(grouping)
+    print_label_note(trials)
     for r in results:
         print(describe(r, args.torque_sign))
     _reflex_note(results)
@@ -538,6 +549,7 @@ def run_figures(args) -> int:
         files = write_lab_report(results, args.out, options={
             **recorded_options(options, args), "truth": truth}, grouping=grouping)
         print(grouping)
+        print_label_note(trials)
         for r in results:
             print(describe(r, args.torque_sign))
         _reflex_note(results)

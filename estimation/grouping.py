@@ -124,6 +124,36 @@ def trial_sets(trials, *, pool: bool = False) -> list[TrialSet]:
     return sorted(sets, key=lambda s: s.label)
 
 
+def near_duplicate_labels(trials) -> str | None:
+    """One note naming the ``condition`` labels of ``trials`` that differ only by case or
+    surrounding spaces (``"Relaxed"``, ``"relaxed "``, ``"relaxed"``), or None.
+
+    The grouping is unchanged: labels are compared as written, surrounding spaces
+    ignored (:func:`condition_label`), so ``"relaxed "`` and ``"relaxed"`` are one set and
+    ``"Relaxed"`` another; the note says which are kept apart and which taken as one."""
+    spellings: dict = {}
+    for t in trials:
+        value = t.meta.get("condition")
+        if isinstance(value, str) and value.strip():
+            spellings.setdefault(value.strip().casefold(), {}).setdefault(value, None)
+    parts = []
+    for raw in (list(v) for v in spellings.values() if len(v) > 1):
+        sets = list(dict.fromkeys(r.strip() for r in raw))
+        said = ", ".join(repr(r) for r in raw)
+        if len(sets) > 1:
+            what = (f"kept apart as {len(sets)} limb states ("
+                    + ", ".join(repr(x) for x in sets) + "; case counts, surrounding "
+                    "spaces do not)")
+        else:
+            what = f"taken as one ({sets[0]!r}: surrounding spaces do not count)"
+        parts.append(f"{said}: {what}")
+    if not parts:
+        return None
+    return ("condition labels that differ only by case or surrounding spaces: "
+            + "; ".join(parts) + "; if they name one limb state, write one spelling in "
+            "every trial's metadata")
+
+
 def describe(sets) -> str:
     """The rule's outcome in one line: ``grouping: 3 set(s): relaxed (label, 2 trials),
     co-contracted (label, 1 trial), relaxed_noref (unlabelled, 1 trial); rule: ...``."""

@@ -31,3 +31,28 @@ def test_estimate_refuses_a_condition_that_is_not_a_string():
     t.meta["condition"] = ["a"]  # was read as the label "['a']"
     with pytest.raises(EstimationError, match=r"x: key 'condition' must be a string"):
         estimation_units([t])
+
+
+def test_labels_differing_by_case_or_spaces_are_grouped_as_before_and_named_once(
+        tmp_path, capsys):
+    """'Relaxed', 'relaxed ' and 'relaxed': grouped as before (case counts, surrounding
+    spaces do not: 2 sets), and one note names the near-duplicate spellings."""
+    from estimation.grouping import near_duplicate_labels, trial_sets
+    trials = []
+    for i, label in enumerate(("Relaxed", "relaxed ", "relaxed", "active")):
+        t = position_trial(K=80.0, B=1.2, I=0.012, duration_s=10, seed=i,
+                           condition=label, name=f"r{i}")
+        trials.append(t)
+        tf.write_trial(tmp_path / f"r{i}", t)
+    sets = trial_sets(trials)
+    assert [(s.label, [t.name for t in s.trials]) for s in sets] == [
+        ("Relaxed", ["r0"]), ("active", ["r3"]), ("relaxed", ["r1", "r2"])]
+    note = near_duplicate_labels(trials)
+    assert "'Relaxed', 'relaxed ', 'relaxed'" in note and "kept apart as 2" in note
+    assert "active" not in note
+    assert near_duplicate_labels(trials[2:]) is None  # 'relaxed' and 'active' only
+    assert "taken as one" in near_duplicate_labels(trials[1:3])
+    assert main(["estimate", str(tmp_path)]) == 0
+    cap = capsys.readouterr()
+    assert cap.err.count("differ only by case or surrounding spaces") == 1, cap.err
+    assert "grouping: 3 set(s)" in cap.out
