@@ -3,27 +3,16 @@ recordings (the independent simulator, its own reflex and channel forms): the be
 single's residual is tried against a second effect, both are named when the second adds
 significantly on held-out data, and no pair is named when the single explains it all."""
 
-import dataclasses
 import json
 
 import numpy as np
 import pytest
 
-import labsim
 from diagnosis import limbfit as lf
 from diagnosis import limbpairs as lp
+from labsim_trials import labsim_trial
 
 EFFECTS = ("stretch_reflex", "channel_delay", "wobbling_mass")
-
-
-def _labsim_trial(kind, seed=1, seconds=15.0, channel_delay_s=None):
-    """A labsim recording without a servo reference, band-limited noise perturbation."""
-    spec = labsim.draw(kind, np.random.default_rng(seed), duration_s=seconds)
-    spec = dataclasses.replace(spec, record_reference=False, perturbation=dataclasses.replace(
-        spec.perturbation, kind="noise"))
-    if channel_delay_s is not None:
-        spec.sensors.tau.delay_s = channel_delay_s
-    return labsim.simulate(spec).trial, spec
 
 
 def _diagnose(trial, **kw):
@@ -33,7 +22,7 @@ def _diagnose(trial, **kw):
 def test_a_reflex_with_a_channel_delay_names_both():
     """A 10 ms torque-channel delay under a 43 ms reflex: the reflex alone takes the
     delay (53 ms) and closes 99 %; the pair names both, each delay where it belongs."""
-    trial, spec = _labsim_trial("channel_delay+reflex", channel_delay_s=0.010)
+    trial, spec = labsim_trial("channel_delay+reflex", channel_delay_s=0.010)
     d = _diagnose(trial)
     assert d.named == ["stretch_reflex", "channel_delay"], d.pairs[:1]
     assert d.fitted["channel_delay"]["delay_s"] == pytest.approx(0.010, abs=0.0015)
@@ -46,7 +35,7 @@ def test_a_reflex_with_a_channel_delay_names_both():
 def test_a_reflex_with_a_wobbling_mass_names_both():
     """labsim's wobbling mass (its own damping) under a reflex: both named, the mass and
     its frequency near the truth (the catalogue ties the damping at 0.3)."""
-    trial, spec = _labsim_trial("wobbling_other_damping+reflex")
+    trial, spec = labsim_trial("wobbling_other_damping+reflex")
     d = _diagnose(trial)
     assert d.named == ["stretch_reflex", "wobbling_mass"], d.pairs[:1]
     w = d.fitted["wobbling_mass"]
@@ -59,7 +48,7 @@ def test_no_false_pair_when_the_reflex_explains_it():
     floor (issue 21 item 1) its residual is no longer significant, so no pair is tried;
     without it (tolerance 0) pairs are tried and no second effect adds significantly on
     held-out data."""
-    trial, _ = _labsim_trial("nominal+reflex")
+    trial, _ = labsim_trial("nominal+reflex")
     d = _diagnose(trial)
     assert d.named == ["stretch_reflex"]
     d = _diagnose(trial, model_tolerance=0.0)
@@ -71,7 +60,7 @@ def test_no_false_pair_when_the_reflex_explains_it():
 
 def test_pair_columns_equal_the_single_columns_with_the_partner_off():
     """The pair's design (reflex + a channel delay of 0) is the reflex's own design."""
-    trial, _ = _labsim_trial("nominal+reflex", seconds=8.0)
+    trial, _ = labsim_trial("nominal+reflex", seconds=8.0)
     cfg = lf.FitConfig(n_jackknife=0)
     pr = lf.prepare([lf.PositionRecord.from_trial(trial)], cfg)[0]
     p = {"delay_s": 0.04, "frequency_hz": 2.0, "rectified": True, "stretch_sign": 1.0}
@@ -90,7 +79,7 @@ def test_pair_columns_of_a_varying_effect_are_its_own_columns(name, params):
     (varying + reflex) hold the varying effect's own columns, not a decimated-twice basis
     (which failed every such pair)."""
     from diagnosis import varying_effects as vary
-    trial, _ = _labsim_trial("nominal+reflex", seconds=8.0)
+    trial, _ = labsim_trial("nominal+reflex", seconds=8.0)
     cfg = lf.FitConfig(n_jackknife=0)
     pr = lf.prepare([lf.PositionRecord.from_trial(trial)], cfg)[0]
     own = vary.columns(pr, name, params)
@@ -156,7 +145,7 @@ def test_the_pipeline_names_the_pair_in_report_json(tmp_path):
     import trialformat as tf
     from diagnosis.config import DiagnosisConfig
     from diagnosis.core import diagnose
-    trial, _ = _labsim_trial("channel_delay+reflex", channel_delay_s=0.010)
+    trial, _ = labsim_trial("channel_delay+reflex", channel_delay_s=0.010)
     trial.name = "cdr"
     (tmp_path / "in").mkdir()
     tf.write_trial(tmp_path / "in" / trial.name, trial)

@@ -7,28 +7,17 @@ split is solved again on the named fit's split before it is compared.
 labsim recordings (the independent simulator, its own filter and channel forms), 15 s at
 1 kHz, a few effects tried: each test takes seconds."""
 
-import dataclasses
 import json
 
 import numpy as np
 import pytest
 
-import labsim
 from diagnosis import limbfit as lf
 from diagnosis import limbties as lt
 from diagnosis import ties as tr
+from labsim_trials import labsim_trial
 
 CHANNEL = ("channel_delay", "torque_sensor_lag", "stretch_reflex", "wobbling_mass")
-
-
-def _labsim_trial(kind, seed, seconds=15.0, channel_delay_s=None):
-    """A labsim recording without a servo reference, band-limited noise perturbation."""
-    spec = labsim.draw(kind, np.random.default_rng(seed), duration_s=seconds)
-    spec = dataclasses.replace(spec, record_reference=False, perturbation=dataclasses.replace(
-        spec.perturbation, kind="noise"))
-    if channel_delay_s is not None:
-        spec.sensors.tau.delay_s = channel_delay_s
-    return labsim.simulate(spec).trial, spec
 
 
 def _diagnose(trial, effects=CHANNEL, **kw):
@@ -40,7 +29,7 @@ def _diagnose(trial, effects=CHANNEL, **kw):
 def antialias():
     """The issue's case: the torque channel through a second-order anti-alias filter
     (labsim draws 50-200 Hz, damping 0.5-0.9; this one 150 Hz, 0.67)."""
-    trial, spec = _labsim_trial("antialias_filter", seed=2)
+    trial, spec = labsim_trial("antialias_filter", seed=2)
     assert spec.sensors.tau.filter.kind == "second_order"
     return trial, spec
 
@@ -73,7 +62,7 @@ def test_a_clear_single_effect_has_no_tie(kind, delay, named):
     """A stretch reflex alone, a 10 ms channel delay alone: named, nothing tied (the
     runner-up a wobbling mass at about 90 % behind a delay's 99.99 %, the reflex's
     runners-up near 0 %)."""
-    trial, spec = _labsim_trial(kind, seed=2, channel_delay_s=delay)
+    trial, spec = labsim_trial(kind, seed=2, channel_delay_s=delay)
     d = _diagnose(trial)
     assert d.named == [named], d.ranking[:2]
     assert d.indistinguishable == []
@@ -86,7 +75,7 @@ def test_the_rescoring_reproduces_a_fit_on_its_own_split():
     """limbties.score (the alternatives' evaluator, limbpairs.PairProblem with one
     effect) gives, without refinement, a fit's own held-out reduction on its own split:
     a default-split fit's and a time-varying fit's (interleaved blocks)."""
-    trial, _ = _labsim_trial("saturating_drift", seed=2, seconds=20.0)
+    trial, _ = labsim_trial("saturating_drift", seed=2, seconds=20.0)
     cfg = lf.FitConfig(n_jackknife=0, held_out_fraction=0.4)
     preps = lf.prepare([lf.PositionRecord.from_trial(trial)], cfg)
     nominal = lf.fit_nominal(preps, cfg)
@@ -106,7 +95,7 @@ def test_runner_ups_of_another_split_are_scored_on_the_named_split():
     drift closes 84 % of the last 40 % (its rate on the search bound there) but 97 % of
     the interleaved blocks, 1.6 points behind the saturating drift's 98.5 %: the two are
     indistinguishable over 20 s, and a longer recording would separate them."""
-    trial, _ = _labsim_trial("saturating_drift", seed=2, seconds=20.0)
+    trial, _ = labsim_trial("saturating_drift", seed=2, seconds=20.0)
     d = _diagnose(trial, effects=("stiffness_drift", "stiffness_saturating", "channel_delay",
                                   "wobbling_mass"))
     assert d.named == ["stiffness_saturating"], d.ranking[:2]

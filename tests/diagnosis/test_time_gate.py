@@ -4,20 +4,13 @@ gap significant, so that the catalogue is fitted even when the whole-record gap 
 the change away. Data: labsim (the independent simulator), the draws of
 bench/bench_time_state.py."""
 
-import dataclasses
-
-import numpy as np
-
-import labsim
 from diagnosis import limbfit as lf
+from labsim_trials import labsim_trial
 
 
 def _record(kind, seed):
-    spec = labsim.draw(kind, np.random.default_rng(seed))
-    # as the bench: no recorded reference, a band-limited noise perturbation
-    spec = dataclasses.replace(spec, record_reference=False, perturbation=dataclasses.replace(
-        spec.perturbation, kind="noise"))
-    return lf.PositionRecord.from_trial(labsim.simulate(spec).trial)
+    # as the bench: no recorded reference, a band-limited noise perturbation, 60 s
+    return lf.PositionRecord.from_trial(labsim_trial(kind, seed, seconds=None)[0])
 
 
 class _Quiet:
