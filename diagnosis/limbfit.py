@@ -104,6 +104,11 @@ class FitConfig:
     form_profile : widen the named (best) fit's jackknife intervals to their envelope over
         refits at the plausible alternatives of the choices the fit ties or picks
         (diagnosis.formprofile: reflex and wobbling-mass damping, rectification).
+    search_trials : with more records than this, the grid and the Nelder-Mead search of a
+        candidate's nonlinear parameters run on this many evenly spaced records, and only
+        the final refinement on all (a session's cost then grows with the records through
+        the refinements alone; 0: always all records). The answer is the optimum on all
+        records from the subset's start, as for any start.
     """
 
     band_hz: float = 30.0
@@ -125,6 +130,7 @@ class FitConfig:
     form_profile: bool = True
     model_tolerance: float | str = "measured"
     tolerance_factor: float = 2.0
+    search_trials: int = 16
 
 
 @dataclass
@@ -912,6 +918,8 @@ class _Problem:
         self.unit = unit or 1.0  # objectives relative to the nominal one
         self.nl = _nonlinear(name) if name else []
         self.masks = None
+        self.active = None  # indices of the search's subset of records (None: all)
+        self.memo = None    # columns kept per parameter point (one-step jackknife)
         self.n_eval = 0
         self.servo = name == "servo_bandwidth"
         if self.servo:
@@ -921,35 +929,69 @@ class _Problem:
         return {**self.fixed, **{p.name: _from_x(p, xi) for p, xi in zip(self.nl, x)}}
 
     def evaluate(self, params: dict):
-        """(objective, torque solution, angle residuals)."""
+        """(objective, torque solution, angle residuals), on the records of the search's
+        subset while one is active (:meth:`search`), else on all."""
         self.n_eval += 1
+        preps, masks = self.preps, self.masks
+        if self.active is not None:
+            preps = [self.preps[i] for i in self.active]
+            masks = None if masks is None else [masks[i] for i in self.active]
         if self.servo:
-            sol = self._torque if self.masks is None else _solve(
-                self.preps, [pr.base for pr in self.preps], self.masks)
-            ang = [_angle_residual(pr, params) for pr in self.preps]
+            sol = self._torque if masks is None and self.active is None else _solve(
+                preps, [pr.base for pr in preps], masks)
+            ang = [_angle_residual(pr, params) for pr in preps]
         else:
             try:
-                cols = [pr.columns(self.name, params) for pr in self.preps]
+                cols = self._columns(preps, params)
             except ValueError:
                 return math.inf, None, None
-            sol = _solve(self.preps, cols, self.masks)
-            ang = [_angle_residual(pr, None) for pr in self.preps]
+            sol = _solve(preps, cols, masks)
+            ang = [_angle_residual(pr, None) for pr in preps]
         obj = sol.cal_energy
-        for i, (pr, a) in enumerate(zip(self.preps, ang)):
+        for i, (pr, a) in enumerate(zip(preps, ang)):
             if a is not None:
-                m = pr.cal if self.masks is None else self.masks[i]
+                m = pr.cal if masks is None else masks[i]
                 obj += float(np.sum(a[m] ** 2)) / pr.theta_norm ** 2
         return obj, sol, ang
+
+    def _columns(self, preps, params):
+        """Every record's columns at ``params``; kept while a memo is open (the columns do
+        not depend on the masks: a one-step jackknife solves every block on them)."""
+        if self.memo is None:
+            return [pr.columns(self.name, params) for pr in preps]
+        key = (tuple(sorted(params.items())), None if self.active is None
+               else tuple(int(i) for i in self.active))
+        if key not in self.memo:
+            self.memo[key] = [pr.columns(self.name, params) for pr in preps]
+        return self.memo[key]
 
     def objective(self, x):
         return self.evaluate(self.params(x))[0] / self.unit
 
+    @property
+    def many(self) -> bool:
+        return many_records(self)
+
     def search(self, start=None):
-        """Grid then Nelder-Mead; returns the best x (array)."""
+        """Grid then Nelder-Mead; returns the best x (array). With more records than
+        ``cfg.search_trials``, both run on that many evenly spaced records and the best
+        is refined on all (FitConfig)."""
         if not self.nl:
             return np.zeros(0)
         if start is not None:
-            return self._refine(np.asarray(start, float), maxiter=15 * len(self.nl))
+            return self._refine_nm(np.asarray(start, float), maxiter=15 * len(self.nl))
+        if not self.many or self.active is not None:
+            return self._search_all()
+        return self.polish(self._on_subset(self._search_all))
+
+    def _on_subset(self, fn, *args, **kw):
+        return on_subset(self, fn, *args, **kw)
+
+    def polish(self, x, steps: int = 2):
+        """``x`` (a subset's optimum) finished on all records (:func:`polish`)."""
+        return polish(self.objective, x, steps)
+
+    def _search_all(self):
         band = min(pr.band for pr in self.preps)
         grids = [_grid(p, self.cfg.grid if len(self.nl) == 1 else
                        max(6, int(self.cfg.grid * (1.3 if p.name == "delay_s" else 0.7))),
@@ -969,6 +1011,13 @@ class _Problem:
         return best_x
 
     def _refine(self, x0, maxiter=None):
+        """Nelder-Mead from ``x0`` (:func:`nelder_mead`); with many records (``many``)
+        and no masks, on the search's subset and then polished on all."""
+        if self.many and self.active is None and self.masks is None:
+            return self.polish(self._on_subset(self._refine_nm, x0, maxiter))
+        return self._refine_nm(x0, maxiter)
+
+    def _refine_nm(self, x0, maxiter=None):
         step = 0.03 if maxiter is None else 0.01  # of the search span
         return nelder_mead(self.objective, x0, step=step, maxiter=maxiter)
 
@@ -985,6 +1034,95 @@ def nelder_mead(fn, x0, *, step: float = 0.03, maxiter: int | None = None) -> np
                                      "xatol": 2e-5, "fatol": 1e-8,
                                      "maxiter": maxiter or 40 * len(x0)})
     return res.x
+
+
+def many_records(prob) -> bool:
+    """More records than ``cfg.search_trials`` (FitConfig): searches run on a subset, and
+    are finished, like the jackknife's replicates, by Newton steps on all records."""
+    k = prob.cfg.search_trials
+    return 0 < k < len(prob.preps)
+
+
+def on_subset(prob, fn, *args, **kw):
+    """``fn(*args, **kw)`` with ``prob``'s evaluations on ``cfg.search_trials`` evenly
+    spaced records (``prob.active``), its objective's scale (``prob.unit``) their share
+    of the calibration rows (the objective is a sum over records)."""
+    unit = prob.unit
+    prob.active = np.unique(np.linspace(0, len(prob.preps) - 1,
+                                        prob.cfg.search_trials).round().astype(int))
+    rows = [int(pr.cal.sum()) for pr in prob.preps]
+    prob.unit = unit * sum(rows[i] for i in prob.active) / max(1, sum(rows))
+    try:
+        return fn(*args, **kw)
+    finally:
+        prob.active, prob.unit = None, unit
+
+
+#: objective (relative to the nominal model's) below which a candidate explains enough of
+#: the gap for its refused Newton polish to be replaced by Nelder-Mead on all records
+POLISH_RELEVANT = 0.95
+
+
+def polish(fn, x, steps: int = 2):
+    """``x`` (a subset's optimum) finished on ``fn`` (the objective on all records,
+    relative to the nominal model's) by at most ``steps`` Newton steps
+    (:func:`newton_step`). A step shorter than the differences' step that does not lower
+    ``fn`` ends it at ``x`` (the optimum within that resolution: a delay's misfit has a
+    kink at every whole sample). Where a step is refused, or a longer one does not lower
+    ``fn``: Nelder-Mead from ``x`` (at most 15 iterations per coordinate) when the
+    candidate explains a part of the gap (``fn`` below :data:`POLISH_RELEVANT`), else
+    ``x`` as it is (a flat misfit: the candidate explains nothing, and its optimum's
+    place does not matter)."""
+    x = np.asarray(x, float)
+    f0 = fn(x)
+    for _ in range(steps):
+        xn = newton_step(fn, x, f0)
+        fn_new = math.inf if xn is None else fn(xn)
+        if not fn_new <= f0:
+            if f0 >= POLISH_RELEVANT or (xn is not None
+                                         and np.max(np.abs(xn - x)) <= NEWTON_H):
+                return x  # nothing to find, or at the optimum within the differences' step
+            return nelder_mead(fn, x, step=0.01, maxiter=15 * x.size)
+        done = np.max(np.abs(xn - x)) < 1e-4
+        x, f0 = xn, fn_new
+        if done:
+            break
+    return x
+
+
+NEWTON_H = 0.01     # finite-difference step of newton_step [search span]
+NEWTON_MAX = 0.05   # largest Newton step accepted [search span]
+
+
+def newton_step(fn, x, f0=None, h: float = NEWTON_H):
+    """One Newton step on ``fn`` from ``x`` (search coordinates in [0, 1]) with the
+    gradient and Hessian of central finite differences of step ``h``: 1 + 2 p + p (p - 1) / 2
+    evaluations for p coordinates. None where the step is not to be trusted: a point
+    within ``h`` of a bound, a Hessian not positive definite, or a step longer than
+    :data:`NEWTON_MAX` (the caller then refines by Nelder-Mead)."""
+    x = np.asarray(x, float)
+    p = x.size
+    if p == 0 or np.any(x - h < 0) or np.any(x + h > 1):
+        return None
+    f0 = fn(x) if f0 is None else f0
+    e = np.eye(p) * h
+    fp = np.array([fn(x + e[i]) for i in range(p)])
+    fm = np.array([fn(x - e[i]) for i in range(p)])
+    g = (fp - fm) / (2 * h)
+    H = np.diag((fp - 2 * f0 + fm) / h ** 2)
+    for i in range(p):
+        for j in range(i + 1, p):
+            H[i, j] = H[j, i] = (fn(x + e[i] + e[j]) - fp[i] - fp[j] + f0) / h ** 2
+    if not np.all(np.isfinite(H)) or not np.all(np.isfinite(g)):
+        return None
+    try:
+        np.linalg.cholesky(H)
+    except np.linalg.LinAlgError:
+        return None
+    d = -np.linalg.solve(H, g)
+    if np.max(np.abs(d)) > NEWTON_MAX:
+        return None
+    return np.clip(x + d, 0.0, 1.0)
 
 
 # ----------------------------------------------------------------------------- results
@@ -1273,34 +1411,53 @@ def _product(*lists):
 
 
 def _jackknife(prob: _Problem, x, lin, cfg):
-    """Delete-one-block jackknife 95 % intervals of every primary parameter."""
+    """Delete-one-block jackknife 95 % intervals of every primary parameter.
+
+    Each replicate's nonlinear parameters are refined from the full fit's ``x`` by
+    Nelder-Mead on the data without its block; with many records (``prob.many``) by one
+    Newton step instead (the one-step jackknife: the replicates of a smooth objective
+    from one set of finite differences, their columns computed once for every block),
+    Nelder-Mead where the step is refused (:func:`newton_step`)."""
     m = cfg.n_jackknife
     names = [p.name for p in prob.nl] + list(lin)
-    reps, limb_reps = [], []
     n_eval0 = prob.n_eval
-    for b in range(m):
-        masks = []
-        for pr in prob.preps:
-            idx = np.flatnonzero(pr.cal)
-            blocks = np.array_split(idx, m)
-            mk = pr.cal.copy()
-            mk[blocks[b]] = False
-            masks.append(mk)
-        prob.masks = masks
-        xb = prob.search(start=x) if prob.nl else x
-        params = prob.params(xb)
-        _, sol, _ = prob.evaluate(params)
-        vals = [params[p.name] for p in prob.nl]
-        vals += [float(sol.coef[3 * prob.preps[0].n ** 2 + i]) for i in range(len(lin))]
-        reps.append(vals)
-        limb_reps.append(np.asarray(sol.coef[:3 * prob.preps[0].n ** 2], float))
-    prob.masks = None
-    reps = np.array(reps)
+    one_step = prob.many and bool(prob.nl)
+    prob.memo = {} if one_step else None
+    try:
+        reps = [_replicate(prob, x, _block_masks(prob.preps, m, b), one_step)
+                for b in range(m)]
+    finally:
+        prob.masks, prob.memo = None, None
+    vals = np.array([[params[p.name] for p in prob.nl]
+                     + [float(sol.coef[3 * prob.preps[0].n ** 2 + i]) for i in range(len(lin))]
+                     for params, sol in reps])
+    limb_reps = np.array([np.asarray(sol.coef[:3 * prob.preps[0].n ** 2], float)
+                          for _, sol in reps])
     full = np.array([prob.params(x)[p.name] for p in prob.nl] + list(lin.values()))
-    se = np.sqrt((m - 1) / m * np.sum((reps - reps.mean(axis=0)) ** 2, axis=0))
-    prob.limb_ci = _limb_half_widths(np.array(limb_reps), prob.preps[0].n)
+    se = np.sqrt((m - 1) / m * np.sum((vals - vals.mean(axis=0)) ** 2, axis=0))
+    prob.limb_ci = _limb_half_widths(limb_reps, prob.preps[0].n)
     return ({nm: [float(v - 1.96 * s), float(v + 1.96 * s)]
              for nm, v, s in zip(names, full, se)}, prob.n_eval - n_eval0)
+
+
+def _block_masks(preps, m: int, b: int) -> list:
+    """Every record's calibration mask without its ``b``-th of ``m`` blocks."""
+    masks = []
+    for pr in preps:
+        mk = pr.cal.copy()
+        mk[np.array_split(np.flatnonzero(pr.cal), m)[b]] = False
+        masks.append(mk)
+    return masks
+
+
+def _replicate(prob, x, masks, one_step: bool):
+    """(params, solution) of the fit refined from ``x`` on ``masks``."""
+    prob.masks = masks
+    xb = newton_step(prob.objective, x) if one_step else None
+    if xb is None:
+        xb = prob.search(start=x) if prob.nl else x
+    params = prob.params(xb)
+    return params, prob.evaluate(params)[1]
 
 
 def _limb_half_widths(reps, n: int) -> dict:

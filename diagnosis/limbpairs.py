@@ -165,6 +165,7 @@ class PairProblem:
         self.fixed = {k: dict(fixed.get(k, {})) for k in self.names}
         self.nl = [(k, p) for k in self.names for p in searched(lf, k)]
         self.split, self.unit, self.n_eval = split, unit or 1.0, 0
+        self.active = None  # the search's subset of records (limbfit.on_subset)
 
     def context(self):
         return vary.swapped(self.preps, self.split) if self.split is not None else nullcontext()
@@ -187,15 +188,16 @@ class PairProblem:
         """(objective, solution, angle residuals, layout); inf when the columns fail."""
         self.n_eval += 1
         lf = self.lf
+        preps = self.preps if self.active is None else [self.preps[i] for i in self.active]
         with self.context():
             try:
-                built = [pair_columns(pr, params) for pr in self.preps]
+                built = [pair_columns(pr, params) for pr in preps]
             except ValueError:
                 return math.inf, None, None, None
-            sol = lf._solve(self.preps, [c for c, _ in built])
-            ang = [lf._angle_residual(pr, params.get("servo_bandwidth")) for pr in self.preps]
+            sol = lf._solve(preps, [c for c, _ in built])
+            ang = [lf._angle_residual(pr, params.get("servo_bandwidth")) for pr in preps]
             obj = sol.cal_energy
-            for pr, a in zip(self.preps, ang):
+            for pr, a in zip(preps, ang):
                 if a is not None:
                     obj += float(np.sum(a[pr.cal] ** 2)) / pr.theta_norm ** 2
         return obj, sol, ang, built[0][1]
@@ -205,10 +207,21 @@ class PairProblem:
 
     def search(self, x0, free):
         """Grid over the coordinates ``free`` (indices into ``nl``; the others at ``x0``),
-        the best ``refine_starts`` points refined over those coordinates by Nelder-Mead."""
+        the best ``refine_starts`` points refined over those coordinates by Nelder-Mead;
+        with many records on a subset of them, polished on all (limbfit.on_subset)."""
         x0 = np.asarray(x0, float)
         if not free:
             return x0
+        if self.active is None and self.lf.many_records(self):
+            x = self.lf.on_subset(self, self.search, x0, free)
+
+            def along(sub):
+                y = x.copy()
+                y[list(free)] = sub
+                return self.objective(y)
+            out = x.copy()
+            out[list(free)] = self.lf.polish(along, x[list(free)])
+            return out
         band = min(pr.band for pr in self.preps)
         grids = []
         for i in free:
@@ -399,7 +412,11 @@ def refine(prob, x):
     """One joint Nelder-Mead step over both effects' nonlinear parameters."""
     if not prob.nl:
         return np.asarray(x, float)
-    x1 = prob._refine(prob.objective, x, step=0.03, maxiter=40 * len(prob.nl))
+    if prob.lf.many_records(prob):  # on a subset, polished on all (limbfit.on_subset)
+        x1 = prob.lf.polish(prob.objective, prob.lf.on_subset(
+            prob, prob._refine, prob.objective, x, step=0.03, maxiter=40 * len(prob.nl)))
+    else:
+        x1 = prob._refine(prob.objective, x, step=0.03, maxiter=40 * len(prob.nl))
     return x1 if prob.objective(x1) <= prob.objective(x) else np.asarray(x, float)
 
 

@@ -85,7 +85,10 @@ def score(lf, preps, params, nominal, cfg, split, refine: bool = True):
                    for k, p in prob.nl])
     x = x0
     if refine and prob.nl:
-        x1 = prob._refine(prob.objective, x0, step=0.01, maxiter=15 * len(prob.nl))
+        if lf.many_records(prob):  # Newton steps (Nelder-Mead where refused)
+            x1 = lf.polish(prob.objective, x0)
+        else:
+            x1 = prob._refine(prob.objective, x0, step=0.01, maxiter=15 * len(prob.nl))
         x = x1 if prob.objective(x1) <= prob.objective(x0) else x0
     p = prob.params(x)
     obj, sol, ang, layout = prob.evaluate(p)
