@@ -76,7 +76,7 @@ def searched(lf, name: str) -> list:
 def _extra_raw(pr, name, params):
     """Full-rate (N, n) torque column of a limb effect solved by its gain, or None."""
     if name == "stretch_reflex":
-        return lm.reflex_torque(pr.omega, pr.fs, params)
+        return pr.reflex(params)
     if name == "wobbling_mass":
         p = lm.effect_params(name, params)
         b, a = lm.second_order_lowpass(float(p["frequency_hz"]), float(p["damping"]),
@@ -128,11 +128,13 @@ def pair_columns(pr, effects: dict):
             blocks.append(ex.reshape(N, n, 1))
             layout[k] = slice(width, width + 1)
             width += 1
-    full = np.concatenate(blocks, axis=2).reshape(N, -1)
     channel = {k: eff[k] for k in eff if k in lm.CHANNEL_EFFECTS}
     if channel:
-        full = lm.channel_apply(full, pr.fs, channel)
-    cols = full[::pr.D][:pr.Nd].reshape(pr.Nd, n, -1)
+        full = lm.channel_apply(np.concatenate(blocks, axis=2).reshape(N, -1), pr.fs,
+                                channel)
+        cols = full[::pr.D][:pr.Nd].reshape(pr.Nd, n, -1)
+    else:  # the same samples, kept before they are put side by side (D times fewer)
+        cols = np.concatenate([b[::pr.D][:pr.Nd] for b in blocks], axis=2)
     for k in eff:
         if not vary.is_varying(k):
             continue
