@@ -325,6 +325,21 @@ def _nominal_on(lf, preps, nominal, cfg, split):
     """(calibration, held-out) nominal gap values on ``split`` (the default: as fitted)."""
     if split is None:
         return nominal["gaps"]["cal"].value, nominal["gaps"]["held"].value
+    # the same split is asked for by every pair and every re-scored alternative on it:
+    # kept with the nominal fit (a function of the records, the split and the settings)
+    cache = nominal.setdefault("_gaps_on_split", {})
+    key = (repr(cfg), tuple(hash(c.tobytes()) ^ hash(h.tobytes()) for c, h in split),
+           tuple(id(pr) for pr in preps))
+    hit = cache.get(key)
+    if hit is not None and all(np.array_equal(c, c0) and np.array_equal(h, h0)
+                               for (c, h), (c0, h0) in zip(split, hit[0])):
+        return hit[1]
+    cache[key] = ([(c.copy(), h.copy()) for c, h in split], _nominal_solved_on(
+        lf, preps, nominal, cfg, split))
+    return cache[key][1]
+
+
+def _nominal_solved_on(lf, preps, nominal, cfg, split):
     with vary.swapped(preps, split):
         sol = lf._solve(preps, [pr.base for pr in preps])
         ang = [lf._angle_residual(pr, None) for pr in preps]

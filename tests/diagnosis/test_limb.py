@@ -128,3 +128,25 @@ def test_fractional_delay_shifts_a_ramp_exactly_and_holds_the_edges():
     np.testing.assert_allclose(fractional_delay(x, 1e-9)[:, 0], x[:, 0], atol=1e-8)
     np.testing.assert_allclose(fractional_delay(x, -2.5)[:17, 0], x[:17, 0] + 2.5)
     assert fractional_delay(x, 0.3)[0, 0] == 0.0 and fractional_delay(x, -2.5)[-1, 0] == 19.0
+
+
+def test_fractional_delay_is_the_linear_interpolation_bit_for_bit():
+    """fractional_delay: (1 - frac) x[i0] + frac x[i1] with the edges held, the very
+    numbers of that formula (its in-place form is a speed-up only), any dtype."""
+    import numpy as np
+    from diagnosis import limb as lm
+    rng = np.random.default_rng(3)
+    for shape in [(4000, 1), (3000, 3)]:
+        for dtype in (float, np.float32):
+            x = rng.standard_normal(shape).astype(dtype)
+            n = shape[0]
+            for d in (40.3, -3.7, 0.5, 2.0, 1e-9, 5000.2, -7.0):
+                idx = np.arange(n) - d
+                lo = np.floor(idx)
+                frac = (idx - lo)[:, None]
+                i0 = np.clip(lo.astype(int), 0, n - 1)
+                i1 = np.clip(lo.astype(int) + 1, 0, n - 1)
+                ref = (1.0 - frac) * x[i0] + frac * x[i1]
+                got = lm.fractional_delay(x, d)
+                assert got.dtype == ref.dtype
+                np.testing.assert_array_equal(got, ref)
