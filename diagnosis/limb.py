@@ -253,18 +253,41 @@ def fractional_delay(x: np.ndarray, delay_samples: float) -> np.ndarray:
     idx = np.arange(n) - float(delay_samples)
     lo = np.floor(idx)
     frac = (idx - lo)[:, None]
-    i0 = np.clip(lo.astype(int), 0, n - 1)
-    i1 = np.clip(lo.astype(int) + 1, 0, n - 1)
-    return (1.0 - frac) * x[i0] + frac * x[i1]
+    i0 = lo.astype(int)
+    i1 = np.clip(i0 + 1, 0, n - 1)
+    np.clip(i0, 0, n - 1, out=i0)
+    # (1 - frac) x[i0] + frac x[i1], the same operations with fewer temporaries (a search
+    # delays the velocity at every step)
+    out = (1.0 - frac) * np.take(x, i0, axis=0)
+    out += frac * np.take(x, i1, axis=0)
+    return out
 
 
-def reflex_torque(omega: np.ndarray, fs: float, params: dict) -> np.ndarray:
-    """The reflex torque (N, n) [N m] of the stretch_reflex effect from velocity (N, n)."""
-    p = effect_params("stretch_reflex", params)
+def reflex_drive(omega: np.ndarray, fs: float, p: dict) -> np.ndarray:
+    """The velocity (N, n) that drives the stretch reflex's activation: ``omega``
+    delayed and, when rectified, half-wave rectified (``p``: the effect's parameters
+    completed by :func:`effect_params`). A function of the delay and the rectification
+    only: fits that vary the activation frequency at one delay reuse it."""
     v = fractional_delay(omega, float(p["delay_s"]) * fs)
     if p["rectified"]:
         sign = 1.0 if float(p["stretch_sign"]) >= 0 else -1.0
         v = np.maximum(sign * v - float(p["threshold_rad_s"]), 0.0) * sign
+    return v
+
+
+def reflex_drive_key(p: dict) -> tuple:
+    """What :func:`reflex_drive` depends on in ``p`` (completed parameters)."""
+    return (float(p["delay_s"]), bool(p["rectified"]), float(p["stretch_sign"]),
+            float(p["threshold_rad_s"]))
+
+
+def reflex_torque(omega: np.ndarray, fs: float, params: dict, *, drive=None) -> np.ndarray:
+    """The reflex torque (N, n) [N m] of the stretch_reflex effect from velocity (N, n).
+
+    ``drive``, optional: :func:`reflex_drive` of these ``omega`` and ``fs`` for the
+    completed parameters (a cached one); computed here when None."""
+    p = effect_params("stretch_reflex", params)
+    v = reflex_drive(omega, fs, p) if drive is None else drive
     b, a = second_order_lowpass(float(p["frequency_hz"]), float(p["damping"]), fs)
     return float(p["gain"]) * signal.lfilter(b, a, v, axis=0)
 

@@ -209,6 +209,9 @@ class _Prepared:
                              f"position fits (at least {4 * sum(cfg.edge_s):g} s)")
         self.cal[:head] = False
         self.held[Nd - tail:] = False
+        # the samples any fit or gap may use (the default split's two parts): a varying
+        # effect's split swaps cal and held in and out (varying_effects.swapped), this not
+        self.usable = self.cal | self.held
         if rec.theta_ref is not None:
             self.theta_lp = self.lp(rec.theta)
         self.t = (np.arange(N) / rec.fs)[::self.D]
@@ -216,6 +219,22 @@ class _Prepared:
         self.offset_cols = self.offsets()
         self.noise_tau = _white_level(rec.tau, rec.fs)
         self.noise_theta = _white_level(rec.theta, rec.fs)
+
+    def reflex(self, params: dict):
+        """lm.reflex_torque of this record's velocity for the stretch reflex ``params``,
+        its delayed (and rectified) velocity kept for the last two delays and
+        rectifications (a search varies the activation frequency at one delay: the grid's
+        inner axis)."""
+        p = lm.effect_params("stretch_reflex", params)
+        key = lm.reflex_drive_key(p)
+        cache = self.__dict__.setdefault("_reflex_drive", {})
+        v = cache.get(key)
+        if v is None:
+            v = lm.reflex_drive(self.omega, self.fs, p)
+            if len(cache) >= 2:
+                cache.pop(next(iter(cache)))  # the oldest
+            cache[key] = v
+        return lm.reflex_torque(self.omega, self.fs, params, drive=v)
 
     def motion_inputs(self):
         """The coherence floor's inputs (:func:`_motion_inputs`), computed once."""
@@ -278,7 +297,7 @@ class _Prepared:
         scaled = name in ("stiffness_amplitude", "stiffness_drift")
         extra = []
         if name == "stretch_reflex":
-            extra.append(lm.reflex_torque(self.omega, self.fs, eff[name]))
+            extra.append(self.reflex(eff[name]))
         elif name == "wobbling_mass":
             p = lm.effect_params(name, eff[name])
             b, a = lm.second_order_lowpass(float(p["frequency_hz"]), float(p["damping"]),
@@ -374,15 +393,35 @@ def _project_offsets(pr, cols, m):
     1 / pr.norm, and the orthonormal basis Q (M, k) of the offsets' span on those rows with
     R (k, 2), offset basis = Q R."""
     p = cols.shape[2]
-    basis = np.stack([np.ones(int(m.sum())), pr.t[m] - pr.t[-1] / 2], axis=1)
-    Q, R = np.linalg.qr(basis)
-    keep = np.abs(np.diag(R)) > 1e-12 * max(1.0, np.abs(R).max())
-    Q, R = Q[:, keep], R[keep]
+    Q, R = _offset_basis(pr, m)
     X = cols[m].reshape(Q.shape[0], -1)                     # (M, n p)
     y = pr.tau_lp[m]                                        # (M, n)
     Xr = X - Q @ (Q.T @ X)
     yr = y - Q @ (Q.T @ y)
     return Xr.reshape(-1, p) / pr.norm, yr.reshape(-1) / pr.norm, Q, R
+
+
+#: offset bases kept per record (the masks of a fit, its jackknife blocks and splits)
+_OFFSET_CACHE = 16
+
+
+def _offset_basis(pr, m):
+    """(Q, R) of :func:`_project_offsets` for record ``pr`` on mask ``m``: a function of
+    the mask alone, kept per record for the last _OFFSET_CACHE masks (every evaluation of
+    a search solves on the same rows)."""
+    cache = pr.__dict__.setdefault("_offset_qr", {})
+    key = hash(m.tobytes())
+    hit = cache.get(key)
+    if hit is not None and np.array_equal(hit[0], m):
+        return hit[1], hit[2]
+    basis = np.stack([np.ones(int(m.sum())), pr.t[m] - pr.t[-1] / 2], axis=1)
+    Q, R = np.linalg.qr(basis)
+    keep = np.abs(np.diag(R)) > 1e-12 * max(1.0, np.abs(R).max())
+    Q, R = Q[:, keep], R[keep]
+    if len(cache) >= _OFFSET_CACHE:
+        cache.pop(next(iter(cache)))  # the oldest
+    cache[key] = (m.copy(), Q, R)
+    return Q, R
 
 
 def _solve_dense(preps, cols_list, masks=None) -> _Solution:

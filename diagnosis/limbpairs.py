@@ -76,7 +76,7 @@ def searched(lf, name: str) -> list:
 def _extra_raw(pr, name, params):
     """Full-rate (N, n) torque column of a limb effect solved by its gain, or None."""
     if name == "stretch_reflex":
-        return lm.reflex_torque(pr.omega, pr.fs, params)
+        return pr.reflex(params)
     if name == "wobbling_mass":
         p = lm.effect_params(name, params)
         b, a = lm.second_order_lowpass(float(p["frequency_hz"]), float(p["damping"]),
@@ -128,11 +128,13 @@ def pair_columns(pr, effects: dict):
             blocks.append(ex.reshape(N, n, 1))
             layout[k] = slice(width, width + 1)
             width += 1
-    full = np.concatenate(blocks, axis=2).reshape(N, -1)
     channel = {k: eff[k] for k in eff if k in lm.CHANNEL_EFFECTS}
     if channel:
-        full = lm.channel_apply(full, pr.fs, channel)
-    cols = full[::pr.D][:pr.Nd].reshape(pr.Nd, n, -1)
+        full = lm.channel_apply(np.concatenate(blocks, axis=2).reshape(N, -1), pr.fs,
+                                channel)
+        cols = full[::pr.D][:pr.Nd].reshape(pr.Nd, n, -1)
+    else:  # the same samples, kept before they are put side by side (D times fewer)
+        cols = np.concatenate([b[::pr.D][:pr.Nd] for b in blocks], axis=2)
     for k in eff:
         if not vary.is_varying(k):
             continue
@@ -336,6 +338,21 @@ def _nominal_on(lf, preps, nominal, cfg, split):
     """(calibration, held-out) nominal gap values on ``split`` (the default: as fitted)."""
     if split is None:
         return nominal["gaps"]["cal"].value, nominal["gaps"]["held"].value
+    # the same split is asked for by every pair and every re-scored alternative on it:
+    # kept with the nominal fit (a function of the records, the split and the settings)
+    cache = nominal.setdefault("_gaps_on_split", {})
+    key = (repr(cfg), tuple(hash(c.tobytes()) ^ hash(h.tobytes()) for c, h in split),
+           tuple(id(pr) for pr in preps))
+    hit = cache.get(key)
+    if hit is not None and all(np.array_equal(c, c0) and np.array_equal(h, h0)
+                               for (c, h), (c0, h0) in zip(split, hit[0])):
+        return hit[1]
+    cache[key] = ([(c.copy(), h.copy()) for c, h in split], _nominal_solved_on(
+        lf, preps, nominal, cfg, split))
+    return cache[key][1]
+
+
+def _nominal_solved_on(lf, preps, nominal, cfg, split):
     with vary.swapped(preps, split):
         sol = lf._solve(preps, [pr.base for pr in preps])
         ang = [lf._angle_residual(pr, None) for pr in preps]
@@ -350,15 +367,6 @@ def _choices(name):
     from itertools import product
     out = [dict(zip(e.choices, combo)) for combo in product(*e.choices.values())]
     return [c for c in out if c.get("rectified", True) or c.get("stretch_sign", 1.0) > 0]
-
-
-def _first_fixed(lf, single):
-    """(discrete choices, nonlinear values) of the single fit's effect."""
-    name = single.effect
-    e = cat.get_effect(name)
-    choices = {k: single.params[k] for k in e.choices}
-    values = {p.name: float(single.params[p.name]) for p in searched(lf, name)}
-    return choices, values
 
 
 def channel_lag_s(name, params) -> float:
@@ -376,36 +384,59 @@ def fit_second(lf, preps, single, other, nominal, cfg):
     with its ``_problem``), the single's nonlinear parameters fixed.
 
     Returns (PairProblem, x, objective) of the best discrete choice of ``other``."""
-    split, _ = _split_of(preps, (single.effect, other))
-    choices_a, values_a = _first_fixed(lf, single)
+    found = [forward_choice(lf, preps, nominal, cfg, single.effect, single.params, other, i)
+             for i in range(len(_choices(other)))]
+    return forward_best(lf, preps, nominal, cfg, single.effect, single.params, other, found)
+
+
+def _forward_problem(lf, preps, nominal, cfg, first, first_params, other, choice):
+    """The PairProblem of ``other`` (its ``choice``-th discrete choice, :func:`_choices`)
+    on top of the single fit of ``first`` (its reported parameters ``first_params``)."""
+    split, _ = _split_of(preps, (first, other))
+    choices_a = {k: first_params[k] for k in cat.get_effect(first).choices}
+    return PairProblem(lf, preps, (first, other),
+                       {first: choices_a, other: _choices(other)[choice]}, cfg, split,
+                       nominal["solution"].cal_energy)
+
+
+def forward_choice(lf, preps, nominal, cfg, first, first_params, other, choice):
+    """One discrete choice of :func:`fit_second`'s forward step: (x, objective,
+    evaluations) of ``other``'s ``choice``-th choice searched on top of ``first`` (its
+    single fit's reported parameters ``first_params``). A task of its own (the choices
+    and the partners are independent): picklable arguments and result."""
+    prob = _forward_problem(lf, preps, nominal, cfg, first, first_params, other, choice)
+    values_a = {p.name: float(first_params[p.name]) for p in searched(lf, first)}
+    x0 = np.array([lf._to_x(p, values_a[p.name]) if k == first else 0.5
+                   for k, p in prob.nl])
+    free = [i for i, (k, _) in enumerate(prob.nl) if k == other]
+    ia = next((i for i, (k, p) in enumerate(prob.nl)
+               if k == first and p.name == "delay_s"), None)
+    if other in lm.CHANNEL_EFFECTS and ia is not None:
+        # the single's delay is the first effect's total delay as measured through
+        # the torque channel: a channel partner takes its share of it (a reflex fitted
+        # at 52 ms over a 10 ms channel delay; the pair's misfit between the two
+        # splittings is higher than at either, so a local step never finds it)
+        prob.coupled = (values_a["delay_s"], prob.nl[ia][1].bounds)
+        x = prob.search(x0, free)
+        x[ia] = lf._to_x(prob.nl[ia][1], prob.params(x)[first]["delay_s"])
+        prob.coupled = None
+    else:
+        x = prob.search(x0, free)
+    obj = prob.objective(x)
+    return np.asarray(x, float), obj, prob.n_eval
+
+
+def forward_best(lf, preps, nominal, cfg, first, first_params, other, found):
+    """(PairProblem, x, objective) of the best of ``found`` (:func:`forward_choice`'s
+    results, one per choice in order; the first of equal objectives), its evaluations
+    those of every choice."""
     best = None
-    n_eval = 0
-    for ch in _choices(other):
-        prob = PairProblem(lf, preps, (single.effect, other),
-                           {single.effect: choices_a, other: ch}, cfg, split,
-                           nominal["solution"].cal_energy)
-        x0 = np.array([lf._to_x(p, values_a[p.name]) if k == single.effect else 0.5
-                       for k, p in prob.nl])
-        free = [i for i, (k, _) in enumerate(prob.nl) if k == other]
-        ia = next((i for i, (k, p) in enumerate(prob.nl)
-                   if k == single.effect and p.name == "delay_s"), None)
-        if other in lm.CHANNEL_EFFECTS and ia is not None:
-            # the single's delay is the first effect's total delay as measured through
-            # the torque channel: a channel partner takes its share of it (a reflex fitted
-            # at 52 ms over a 10 ms channel delay; the pair's misfit between the two
-            # splittings is higher than at either, so a local step never finds it)
-            prob.coupled = (values_a["delay_s"], prob.nl[ia][1].bounds)
-            x = prob.search(x0, free)
-            x[ia] = lf._to_x(prob.nl[ia][1], prob.params(x)[single.effect]["delay_s"])
-            prob.coupled = None
-        else:
-            x = prob.search(x0, free)
-        obj = prob.objective(x)
-        n_eval += prob.n_eval
+    for choice, (x, obj, _) in enumerate(found):
         if best is None or obj < best[2]:
-            best = (prob, x, obj)
-    best[0].n_eval = n_eval
-    return best
+            best = (choice, x, obj)
+    prob = _forward_problem(lf, preps, nominal, cfg, first, first_params, other, best[0])
+    prob.n_eval = sum(k for _, _, k in found)
+    return prob, np.asarray(best[1], float), best[2]
 
 
 def refine(prob, x):
@@ -418,6 +449,13 @@ def refine(prob, x):
     else:
         x1 = prob._refine(prob.objective, x, step=0.03, maxiter=40 * len(prob.nl))
     return x1 if prob.objective(x1) <= prob.objective(x) else np.asarray(x, float)
+
+
+def refine_task(lf, preps, nominal, cfg, first, first_params, other, choice, x):
+    """:func:`refine` of the forward pair (``other``'s ``choice``-th choice on ``first``)
+    at ``x``, as a task: (x, evaluations)."""
+    prob = _forward_problem(lf, preps, nominal, cfg, first, first_params, other, choice)
+    return refine(prob, np.asarray(x, float)), prob.n_eval
 
 
 def _reported(lf, preps, name, params, coef, layout):
@@ -474,6 +512,14 @@ def finish(lf, preps, single, prob, x, nominal, cfg) -> PairFit:
                    None if prob.split is None else _split_of(preps, prob.names)[1])
 
 
+def _forward_cost(lf, name, cfg) -> float:
+    """A rough cost of one forward choice of partner ``name`` (its grid points)."""
+    nl = len(searched(lf, name))
+    if name == "stiffness_modulated":
+        return float(vary.PERIOD_GRID)
+    return float((cfg.grid if nl <= 1 else max(6, int(cfg.grid * 1.3))) ** max(nl, 0))
+
+
 def needs_pair(lf, preps, single, nominal, cfg) -> bool:
     """The single's calibration residual is still significant (module docstring, 1)."""
     if single.at_search_bound or not hasattr(single, "_problem"):
@@ -483,25 +529,46 @@ def needs_pair(lf, preps, single, nominal, cfg) -> bool:
     return bool(r_cal.significant(cfg))
 
 
-def search_pairs(lf, preps, fits, nominal, cfg, partners=None) -> list:
+def search_pairs(lf, preps, fits, nominal, cfg, partners=None, *, run=None) -> list:
     """Pairs built on ``fits[0]`` (limbfit.EffectFit's, best first), best first: every
     pairable partner forward-selected, the best N_REFINED refined jointly. [] when the best single
-    is flagged or leaves no significant calibration gap."""
+    is flagged or leaves no significant calibration gap.
+
+    ``run(fn, arg_tuples, desc)``, optional: ``[fn(lf, preps, nominal, cfg, *a) for a in
+    arg_tuples]``, e.g. on worker processes holding the same records (the forward step of
+    every partner and choice, and the joint refits, are independent tasks:
+    :func:`forward_choice`, :func:`refine_task`); default: in this process. The pairs
+    are the same either way."""
     if not fits or not needs_pair(lf, preps, fits[0], nominal, cfg):
         return []
     first = fits[0]
     names = [f.effect for f in fits[1:] if math.isfinite(f.calibration_objective)]
     if partners is not None:
         names = [k for k in names if k in partners]
-    forward = [(k,) + fit_second(lf, preps, first, k, nominal, cfg)
-               for k in names if pairable(first.effect, k)]
-    if not forward:
+    names = [k for k in names if pairable(first.effect, k)]
+    if not names:
         return []
+    if run is None:
+        def run(fn, arg_tuples, desc=""):
+            return [fn(lf, preps, nominal, cfg, *a) for a in arg_tuples]
+    a = (first.effect, dict(first.params))
+    # every partner's every discrete choice is a task of its own (the costliest first:
+    # the workers take them in this order)
+    tasks = sorted(((k, c) for k in names for c in range(len(_choices(k)))),
+                   key=lambda kc: -_forward_cost(lf, kc[0], cfg))
+    done = dict(zip(tasks, run(forward_choice, [a + kc for kc in tasks], "limbfit pairs")))
+    forward = [(k,) + forward_best(lf, preps, nominal, cfg, *a, k,
+                                   [done[(k, c)] for c in range(len(_choices(k)))])
+               for k in names]
     forward.sort(key=lambda t: t[3])
+    top = forward[:N_REFINED]
+    refined = run(refine_task, [a + (k, _choices(k).index(prob.fixed[k]), x)
+                                for k, prob, x, _ in top], "limbfit pair refits")
     out = []
     for i, (k, prob, x, _) in enumerate(forward):
-        if i < N_REFINED:
-            x = refine(prob, x)
+        if i < len(top):
+            x, k_eval = refined[i]
+            prob.n_eval += k_eval
         out.append(finish(lf, preps, first, prob, x, nominal, cfg))
     out.sort(key=lambda p: p.calibration_objective)
     return out

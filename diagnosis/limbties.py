@@ -124,13 +124,23 @@ def _candidates(named, fits, pairs):
     return out
 
 
+def score_task(lf, preps, nominal, cfg, params, split_effects):
+    """:func:`score` of ``params`` on the split of ``split_effects`` (:func:`split_of`),
+    as a task (picklable arguments and result)."""
+    return score(lf, preps, params, nominal, cfg, split_of(preps, split_effects, cfg)[0])
+
+
 def alternatives(lf, preps, nominal, cfg, named, fits, pairs=(), *,
-                 tie_share: float = ties.TIE_SHARE) -> dict:
+                 tie_share: float = ties.TIE_SHARE, run=None) -> dict:
     """The alternatives to ``named`` (a limbfit.EffectFit of ``fits`` or a
     limbpairs.PairFit of ``pairs``), each on the named fit's split, judged
     (diagnosis.ties.judge). Returns {"rows" (best first), "indistinguishable" (the named
     fit's name and the tied alternatives', [] when none ties),
-    "split" (in words), "named_held_out_reduction", "n_evaluations"}."""
+    "split" (in words), "named_held_out_reduction", "n_evaluations"}.
+
+    ``run(fn, arg_tuples, desc)``, optional: ``[fn(lf, preps, nominal, cfg, *a) for a in
+    arg_tuples]``, e.g. on worker processes holding the same records (every score is an
+    independent task, :func:`score_task`); default: in this process."""
     eff = tuple(named.effects) if hasattr(named, "effects") else (named.effect,)
     params = ({k: dict(v) for k, v in named.params.items()} if len(eff) > 1
               else {eff[0]: dict(named.params)})
@@ -138,27 +148,39 @@ def alternatives(lf, preps, nominal, cfg, named, fits, pairs=(), *,
     share = named.held_out_reduction
     band = min(pr.band for pr in preps)
     rows, n_eval = [], 0
-    named_there = {}  # the named model on another split, by split text
-    for a_eff, a_params, own, flagged, _ in _candidates(named, fits, pairs):
-        a_split, a_text = split_of(preps, a_eff, cfg)
+    # the scores needed first (independent tasks: ``run`` may map them on workers), then
+    # the rows in the candidates' order
+    cands = [(c, split_of(preps, c[0], cfg)) for c in _candidates(named, fits, pairs)]
+    tasks, own_task, named_task = [], {}, {}
+    for i, ((a_eff, a_params, own, _, _), (a_split, a_text)) in enumerate(cands):
         if same_split(preps, split, a_split):
-            rows.append(ties.row(a_eff, a_params, own, share, split=text,
-                                 nameable=not flagged))
             continue
-        s, shown, flags, k = score(lf, preps, a_params, nominal, cfg, split)
-        n_eval += k
+        own_task[i] = len(tasks)
+        tasks.append((a_params, eff))       # the alternative on the named fit's split
         # for the reader, not the rule: the named model on the alternative's split,
         # where the alternative's own figure comes within the margin of the named one's
         # (the comparison the ranking invites)
         near = own is not None and share is not None and own >= share - tie_share
-        if near and a_text not in named_there:
-            named_there[a_text], _, _, k = score(lf, preps, params, nominal, cfg, a_split)
-            n_eval += k
+        if near and a_text not in named_task:
+            named_task[a_text] = len(tasks)
+            tasks.append((params, a_eff))
+    if run is None:
+        def run(fn, arg_tuples, desc=""):
+            return [fn(lf, preps, nominal, cfg, *a) for a in arg_tuples]
+    scores = run(score_task, tasks, "limbties scores") if tasks else []
+    n_eval += sum(k for _, _, _, k in scores)
+    for i, ((a_eff, a_params, own, flagged, _), (a_split, a_text)) in enumerate(cands):
+        if i not in own_task:
+            rows.append(ties.row(a_eff, a_params, own, share, split=text,
+                                 nameable=not flagged))
+            continue
+        s, shown, flags, _ = scores[own_task[i]]
+        near = own is not None and share is not None and own >= share - tie_share
         # judged as fitted on the named split: a fit on a search bound of its own split
         # may be inside its bounds there (and the other way round)
         r = ties.row(a_eff, shown, s, share, split=text, own_split=a_text,
                      own_share=own, rescored=True, nameable=not flags)
-        r["named_on_own_split"] = named_there.get(a_text) if near else None
+        r["named_on_own_split"] = scores[named_task[a_text]][0] if near else None
         rows.append(r)
     rows = ties.judge(rows, eff, params, tie_share, band_hz=band)
     return {"rows": rows, "indistinguishable": ties.indistinguishable(rows, eff), "split": text,

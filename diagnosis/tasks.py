@@ -107,6 +107,17 @@ def _limbfit_setup(state: TaskState, cfg):
     return worker_cache(state, ("limbfit", repr(cfg)), build)
 
 
+def task_limbfit_call(state: TaskState, cfg, fn, args: tuple):
+    """``fn(limbfit, preps, nominal, cfg, *args)`` on this worker's prepared records and
+    nominal fit of the state's trials (:func:`_limbfit_setup`): the independent steps of
+    a position diagnosis after its single fits (diagnosis.limbpairs.forward_choice and
+    refine_task, diagnosis.limbties.score_task); ``fn`` a module-level function, its
+    arguments and result picklable."""
+    from . import limbfit as lf
+    preps, nominal = _limbfit_setup(state, cfg)
+    return fn(lf, preps, nominal, cfg, *args)
+
+
 def task_limbfit(state: TaskState, name: str, cfg) -> dict:
     """A position experiment's fit of one effect (limbfit.fit_effect, no intervals) on
     the state's trials, as its JSON-able record (limbfit.fit_record: the parent rebuilds

@@ -124,7 +124,11 @@ def _switch_indicator(pr):
     w = max(8, int(round(SWITCH_WINDOW_S * pr.fs_d)))
     n = pr.n
     cols = pr.base.reshape(pr.Nd, -1)
-    keep = pr.cal | pr.held
+    # the record's usable samples, whatever split is swapped in when it is first asked
+    # for: a stratified split holds fewer (its out-of-range held-out samples dropped), and
+    # the indicator then depended on which fit asked first (a switching alternative
+    # re-scored on a state effect's split got 19 changes where its own fit had 22)
+    keep = usable(pr)
     ks, starts = [], []
     for s in range(0, pr.Nd - w + 1, w):
         rows = slice(s, s + w)
@@ -175,7 +179,21 @@ def basis(pr, name, params):
     Each basis function is evaluated on the decimated samples only (the same values as
     evaluating it at the full rate and keeping every D-th sample: the functions are
     pointwise); the scheduling variable's scaling (its 1-99 % range over the whole
-    record) is computed once per record."""
+    record) is computed once per record, and the last few bases are kept (a pair's search
+    varies its second effect only: the first's basis is the same at every step). The
+    arrays returned are shared: read them, never write."""
+    key = (name, tuple(sorted((k, repr(v)) for k, v in (params or {}).items())))
+    cache = pr.__dict__.setdefault("_varying_basis", {})
+    if key in cache:
+        return cache[key]
+    out = _basis(pr, name, params)
+    if len(cache) >= 4:
+        cache.pop(next(iter(cache)))  # the oldest
+    cache[key] = out
+    return out
+
+
+def _basis(pr, name, params):
     t = (np.arange(pr.N) / pr.fs)[::pr.D][:pr.Nd]
     if name == "stiffness_saturating":
         return (1.0 - np.exp(-t / float(params["time_constant_s"])))[:, None], None
@@ -247,10 +265,16 @@ def summary(preps, name, params, coef) -> dict:
 
 
 # ----------------------------------------------------------------------------- splits
+def usable(pr):
+    """The samples of prepared record ``pr`` that any fit or gap may use (its default
+    split's calibration and held-out parts, ``pr.usable``), whatever split is swapped in."""
+    u = getattr(pr, "usable", None)
+    return pr.cal | pr.held if u is None else u
+
+
 def split_masks(pr, name):
     """(calibration, held-out, rule, why) masks over the decimated samples of ``pr``."""
-    usable = pr.cal | pr.held
-    idx = np.flatnonzero(usable)
+    idx = np.flatnonzero(usable(pr))
     dur = idx.size / pr.fs_d
     nb = int(max(3, min(N_BLOCKS, dur // BLOCK_MIN_S)))
     blocks = np.array_split(idx, nb)

@@ -177,13 +177,17 @@ class PositionServo(Experiment):
                 formprofile.apply(lf, best, {**ci["form_profile"], "n_evaluations": 0}, cfg)
             best.intervals, best.n_evaluations = ci["intervals"], int(ci["n"])
             best.limb_ci = ci["limb_ci"]
+        # the independent steps after the single fits (the pairs' forward choices and
+        # refits, the ties' scores) on the workers too (tasks.task_limbfit_call)
+        run = _runner_run(runner, trials, cfg)
         pairs = []
         if fits and significant and cfg.pairs:
             from .. import limbpairs as lp
             import sys as _sys
             pairs = _resumable(
                 store, ("limbfit-pairs", fits[0].effect, repr(cfg)),
-                lambda: lp.search_pairs(_sys.modules[lf.__name__], preps, fits, nominal, cfg),
+                lambda: lp.search_pairs(_sys.modules[lf.__name__], preps, fits, nominal, cfg,
+                                        run=run),
                 lambda ps: [p.as_dict() for p in ps],
                 lambda d: [lp.PairFit.from_dict(x) for x in d])
         out = []
@@ -223,7 +227,7 @@ class PositionServo(Experiment):
                 return None
             return _resumable(store, ("limbties", 3, list(eff), repr(cfg)),
                               lambda: lt.alternatives(lf, preps, nominal, cfg, named, fits,
-                                                      pairs),
+                                                      pairs, run=run),
                               lambda d: d, lambda d: d)
 
         return {"fits": out, "pairs": [_pair_fit(p, trials[0].fs) for p in pairs],
@@ -245,7 +249,30 @@ class PositionServo(Experiment):
 def _parallel(runner, trials, names) -> bool:
     """Fit on the runner's workers: more than one worker (or a cluster), more than one
     effect, and the runner's state holds these very trials (the tasks read them there)."""
-    if runner is None or len(names) < 2:
+    if len(names) < 2:
+        return False
+    return _on_workers(runner, trials)
+
+
+def _runner_run(runner, trials, cfg):
+    """``run(fn, arg_tuples, desc)`` mapping ``fn(limbfit, preps, nominal, cfg, *a)`` on
+    the runner's workers (tasks.task_limbfit_call: each worker's own prepared records and
+    nominal fit of the same trials, the same numbers), or None (in this process) when
+    :func:`_on_workers` says no."""
+    if not _on_workers(runner, trials):
+        return None
+    from ..tasks import task_limbfit_call
+
+    def run(fn, arg_tuples, desc=""):
+        return runner.map(task_limbfit_call, [(cfg, fn, tuple(a)) for a in arg_tuples],
+                          desc=desc)
+    return run
+
+
+def _on_workers(runner, trials) -> bool:
+    """More than one worker (or a cluster), and the runner's state holds these very
+    trials (the tasks read them there)."""
+    if runner is None:
         return False
     if getattr(runner, "workers", 1) < 2 and getattr(runner, "_client", None) is None:
         return False

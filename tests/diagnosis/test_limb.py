@@ -161,3 +161,25 @@ def test_sensor_lag_is_continuous_down_to_tiny_time_constants():
         channel_apply(tau, FS, {"torque_sensor_lag": {"time_constant_s": 0.0}}), tau)
     with pytest.raises(ValueError, match="time_constant_s"):
         first_order_lowpass(-1e-3, FS)
+
+
+def test_fractional_delay_is_the_linear_interpolation_bit_for_bit():
+    """fractional_delay: (1 - frac) x[i0] + frac x[i1] with the edges held, the very
+    numbers of that formula (its in-place form is a speed-up only), any dtype."""
+    import numpy as np
+    from diagnosis import limb as lm
+    rng = np.random.default_rng(3)
+    for shape in [(4000, 1), (3000, 3)]:
+        for dtype in (float, np.float32):
+            x = rng.standard_normal(shape).astype(dtype)
+            n = shape[0]
+            for d in (40.3, -3.7, 0.5, 2.0, 1e-9, 5000.2, -7.0):
+                idx = np.arange(n) - d
+                lo = np.floor(idx)
+                frac = (idx - lo)[:, None]
+                i0 = np.clip(lo.astype(int), 0, n - 1)
+                i1 = np.clip(lo.astype(int) + 1, 0, n - 1)
+                ref = (1.0 - frac) * x[i0] + frac * x[i1]
+                got = lm.fractional_delay(x, d)
+                assert got.dtype == ref.dtype
+                np.testing.assert_array_equal(got, ref)

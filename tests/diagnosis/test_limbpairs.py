@@ -95,6 +95,39 @@ def test_pair_columns_of_a_varying_effect_are_its_own_columns(name, params):
                                atol=1e-12 * np.abs(own).max())
 
 
+def test_the_cached_reflex_and_offsets_are_the_computed_ones():
+    """The reflex's delayed velocity kept per delay (limbfit._Prepared.reflex), the
+    offset bases kept per mask (limbfit._offset_basis) and the columns of a pair without
+    a channel effect decimated block by block give the numbers computed anew, bit for
+    bit."""
+    from diagnosis import limb as lm
+    trial, _ = _labsim_trial("nominal+reflex", seconds=8.0)
+    cfg = lf.FitConfig(n_jackknife=0)
+    pr = lf.prepare([lf.PositionRecord.from_trial(trial)], cfg)[0]
+    for d, f, rect in [(0.04, 2.0, True), (0.04, 3.0, True), (0.05, 3.0, True),
+                       (0.04, 2.0, False), (0.04, 2.0, True), (0.06, 1.5, False)]:
+        p = {"gain": 1.0, "delay_s": d, "frequency_hz": f, "rectified": rect,
+             "stretch_sign": 1.0}
+        np.testing.assert_array_equal(pr.reflex(p), lm.reflex_torque(pr.omega, pr.fs, p))
+        r = {k: v for k, v in p.items() if k != "gain"}
+        cols, layout = lp.pair_columns(pr, {"stretch_reflex": r, "wobbling_mass":
+                                            {"frequency_hz": f}})
+        full = np.concatenate([pr.base_full.reshape(pr.N, pr.n, -1),
+                               lp._extra_lp(pr, "stretch_reflex", {**r, "gain": 1.0})[:, :, None],
+                               lp._extra_lp(pr, "wobbling_mass",
+                                            {"frequency_hz": f, "mass": 1.0})[:, :, None]],
+                              axis=2)
+        np.testing.assert_array_equal(cols, full[::pr.D][:pr.Nd])
+    masks = [pr.cal, pr.held, pr.cal.copy(), pr.cal & ~pr.held]
+    masks[2][: pr.Nd // 3] = False
+    for m in masks + masks:
+        Q, R = lf._offset_basis(pr, m)
+        basis = np.stack([np.ones(int(m.sum())), pr.t[m] - pr.t[-1] / 2], axis=1)
+        Q0, R0 = np.linalg.qr(basis)
+        np.testing.assert_array_equal(Q, Q0)
+        np.testing.assert_array_equal(R, R0)
+
+
 def test_two_stiffness_effects_are_not_paired():
     assert not lp.pairable("stiffness_angle", "stiffness_switching")
     assert not lp.pairable("stiffness_drift", "stiffness_saturating")

@@ -87,3 +87,38 @@ def test_a_varying_fit_rebuilt_from_its_record_keeps_its_objective_scale():
     lf.add_intervals(fit, cfg)
     lf.add_intervals(again, cfg)
     assert again.intervals == fit.intervals
+
+
+def test_pairs_and_ties_on_two_workers_equal_the_one_process_ones():
+    """The pairs' forward choices and joint refits (diagnosis.limbpairs) and the ties'
+    scores on the named fit's split (diagnosis.limbties) run as tasks on the workers
+    (tasks.task_limbfit_call): the same pairs and alternatives, bit for bit, as in one
+    process. A reflex over a 10 ms channel delay (labsim): a pair is named, and the
+    time-varying alternative is scored on the pair's (default) split."""
+    import dataclasses
+
+    import labsim
+    spec = labsim.draw("channel_delay+reflex", np.random.default_rng(1), duration_s=15.0)
+    spec = dataclasses.replace(spec, record_reference=False, perturbation=dataclasses.replace(
+        spec.perturbation, kind="noise"))
+    spec.sensors.tau.delay_s = 0.010
+    trials = [labsim.simulate(spec).trial]
+    effects = ("stretch_reflex", "channel_delay", "stiffness_saturating")
+    config = DiagnosisConfig()
+    exp = PositionServo(trials)
+    serial = exp.fit_effects(trials, effects, config)
+    assert serial["pairs"] and serial["pairs"][0].effects[:1] == ("stretch_reflex",)
+    alt_serial = serial["alternatives"](serial["pairs"][0])
+    state = TaskState(token=uuid.uuid4().hex, trials=trials, experiment=exp, model=None,
+                      config=config, plant=None, cal=[], held=[])
+    with Runner(state, workers=2) as runner:
+        parallel = exp.fit_effects(trials, effects, config, runner=runner)
+        alt_parallel = parallel["alternatives"](parallel["pairs"][0])
+        phases = {p["phase"]: p["tasks"] for p in runner.timings}
+    assert phases.get("limbfit pairs", 0) >= 2 and phases.get("limbfit pair refits", 0) >= 1
+    assert phases.get("limbties scores", 0) >= 1
+    assert [_fields(f) for f in parallel["pairs"]] == [_fields(f) for f in serial["pairs"]]
+    assert [f.second_test for f in parallel["pairs"]] == [f.second_test
+                                                          for f in serial["pairs"]]
+    assert any(r["rescored"] for r in alt_serial["rows"])
+    assert alt_parallel == alt_serial

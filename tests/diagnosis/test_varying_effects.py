@@ -71,6 +71,38 @@ def test_switching_counts_the_known_number_of_switches(period, start_high):
     assert f.params["level_ratio"] == pytest.approx(2.0, rel=0.15)
 
 
+def test_the_switching_indicator_does_not_depend_on_the_split_swapped_in():
+    """The change points are read from the record's usable samples whichever split is in
+    place when they are first asked for: a stratified split drops held-out samples, and
+    re-scoring a switching alternative there gave another indicator (fewer changes) than
+    its own fit had, depending on which fit asked first."""
+    t = np.arange(int(FS * DUR)) / FS
+    rec, _ = _record(np.where((t // 4.0) % 2 == 1, 2.0, 1.0))
+    cfg = lf.FitConfig(n_jackknife=0, grid=8)
+    first, later = lf.prepare([rec], cfg)[0], lf.prepare([rec], cfg)[0]
+    own = vary.basis(first, "stiffness_switching", {})[0].copy()
+    changes = first._switch_changes
+    cal, held = later.cal.copy(), later.held.copy()
+    held[: later.Nd // 2] = False   # a split holding fewer samples (as a stratified one)
+    cal[: later.Nd // 4] = False
+    with vary.swapped([later], [(cal, held)]):
+        swapped = vary.basis(later, "stiffness_switching", {})[0].copy()
+    np.testing.assert_array_equal(swapped, own)
+    assert later._switch_changes == changes
+
+
+def test_the_cached_basis_is_the_basis():
+    """vary.basis keeps the last few bases per record: the same arrays as computed anew,
+    for every parameter value asked for in turn."""
+    t = np.arange(int(FS * DUR)) / FS
+    rec, _ = _record(1 + 0.8 * (1 - np.exp(-t / 6.0)))
+    pr = lf.prepare([rec], lf.FitConfig(n_jackknife=0, grid=8))[0]
+    for T in (2.0, 3.0, 2.0, 4.0, 5.0, 6.0, 7.0, 2.0):
+        got = vary.basis(pr, "stiffness_saturating", {"time_constant_s": T})[0]
+        np.testing.assert_array_equal(got, vary._basis(pr, "stiffness_saturating",
+                                                       {"time_constant_s": T})[0])
+
+
 def test_modulated_known_answer():
     t = np.arange(int(FS * DUR)) / FS
     rec, _ = _record(1 + 0.4 * np.sin(2 * np.pi * t / 9.0 + 0.5))
