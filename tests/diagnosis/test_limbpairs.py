@@ -101,7 +101,7 @@ def test_the_cached_reflex_and_offsets_are_the_computed_ones():
     a channel effect decimated block by block give the numbers computed anew, bit for
     bit."""
     from diagnosis import limb as lm
-    trial, _ = _labsim_trial("nominal+reflex", seconds=8.0)
+    trial, _ = labsim_trial("nominal+reflex", seconds=8.0)
     cfg = lf.FitConfig(n_jackknife=0)
     pr = lf.prepare([lf.PositionRecord.from_trial(trial)], cfg)[0]
     for d, f, rect in [(0.04, 2.0, True), (0.04, 3.0, True), (0.05, 3.0, True),
