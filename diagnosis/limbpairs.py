@@ -100,6 +100,11 @@ def _extra_lp(pr, name, params):
     return cache[key]
 
 
+#: a varying effect paired with a gain-like one (a reflex, a wobbling mass) varies that
+#: effect's gain with the same basis (docs/diagnosis.md, "Pairs on position trials")
+VARY_PARTNER_GAIN = True
+
+
 def pair_columns(pr, effects: dict):
     """Low-passed design columns (Nd, n, p) of a record with several effects at once, and
     the coefficient slice of each effect's own columns (``{name: slice}``).
@@ -138,8 +143,16 @@ def pair_columns(pr, effects: dict):
     for k in eff:
         if not vary.is_varying(k):
             continue
-        # the basis is already on the decimated samples (vary.basis): not decimated again
-        phi_d, q = vary.basis(pr, k, eff[k])
+        # the basis is already on the decimated samples (vary.basis): not decimated again;
+        # a switching level is read with the partners' gain-like columns beside the limb's
+        others = [o for o in eff if o in layout and not vary.is_varying(o)]
+        partner = None
+        if k == "stiffness_switching" and others:
+            partner = (tuple((o, tuple(sorted((a, repr(b)) for a, b in eff[o].items())))
+                             for o in others),
+                       np.concatenate([cols[:, :, layout[o]] for o in others],
+                                      axis=2).reshape(pr.Nd, -1))
+        phi_d, q = vary.basis(pr, k, eff[k], partner)
         extra = [cols[:, :, :2 * nn] * phi_d[:, m, None, None] for m in range(phi_d.shape[1])]
         if q is not None:
             for m in range(q.shape[1]):
@@ -151,6 +164,14 @@ def pair_columns(pr, effects: dict):
         layout[k] = slice(width, width + ext.shape[2])
         width += ext.shape[2]
         cols = np.concatenate([cols, ext], axis=2)
+        if others and VARY_PARTNER_GAIN:
+            # the partner's gain follows the same state (a reflex's gain rises with the
+            # co-contraction, falls with fatigue): its column times the basis too
+            g = np.concatenate([cols[:, :, layout[o]] * phi_d[:, m, None, None]
+                                for o in others for m in range(phi_d.shape[1])], axis=2)
+            layout[k + ":partner_gain"] = slice(width, width + g.shape[2])
+            width += g.shape[2]
+            cols = np.concatenate([cols, g], axis=2)
     return cols, layout
 
 
@@ -463,7 +484,16 @@ def _reported(lf, preps, name, params, coef, layout):
     nn = preps[0].n ** 2
     if vary.is_varying(name):
         sub = np.concatenate([coef[:3 * nn], coef[layout[name]]])
-        return vary.summary(preps, name, params, sub)
+        out = vary.summary(preps, name, params, sub)
+        pr = preps[0]
+        last = getattr(pr, "_switch_partner_last", None)
+        if name == "stiffness_switching" and last is not None and any(
+                isinstance(v, slice) and k.endswith(":partner_gain") for k, v in layout.items()):
+            out["n_changes"] = float(pr._switch_partnered[last][1])  # read beside the partner
+        g = layout.get(name + ":partner_gain")
+        if g is not None:  # the partner's gain on the same basis [its gain's units]
+            out["partner_gain_coefficients"] = [float(v) for v in coef[g]]
+        return out
     e = cat.get_effect(name)
     lin = {k: float(coef[layout[name]][i]) for i, k in enumerate(lf.LINEAR.get(name, ()))}
     full = {**params, **lin}

@@ -117,10 +117,28 @@ def _scaled(rho):
 
 
 # ----------------------------------------------------------------------------- basis
-def _switch_indicator(pr):
-    """(N,) 0/1 indicator of the high stiffness level, from a local K per window."""
-    if "_switch" in pr.__dict__:
-        return pr._switch
+def _switch_indicator(pr, partner=None):
+    """(N,) 0/1 indicator of the high stiffness level, from a local K per window.
+
+    ``partner``: (key, (Nd, q) low-passed columns) of a pair's other effect (a reflex's
+    torque), regressed in every window beside the limb's: a reflex otherwise scatters the
+    local K by more than the switch (labsim switching+reflex, seed 102: local K from -73
+    to 330 N m/rad where the truth switches between 30 and 69; with the reflex column
+    27-33 and 62-74)."""
+    if partner is not None:
+        cache = pr.__dict__.setdefault("_switch_partnered", {})
+        if partner[0] not in cache:
+            cache[partner[0]] = _switch_indicator_of(pr, partner[1])
+        pr._switch_partner_last = partner[0]  # the pair's reported change count
+        return cache[partner[0]][0]
+    if "_switch" not in pr.__dict__:
+        pr._switch, pr._switch_changes = _switch_indicator_of(pr, None)
+    return pr._switch
+
+
+def _switch_indicator_of(pr, extra):
+    """(indicator (N,), number of changes) from local K over windows, ``extra`` columns
+    (Nd, q) regressed beside the limb's (None: none)."""
     w = max(8, int(round(SWITCH_WINDOW_S * pr.fs_d)))
     n = pr.n
     cols = pr.base.reshape(pr.Nd, -1)
@@ -136,7 +154,10 @@ def _switch_indicator(pr):
             ks.append(np.nan)
             starts.append(s)
             continue
-        A = np.concatenate([cols[rows], np.ones((w, 1)), pr.t[rows, None] - pr.t[s]], axis=1)
+        parts = [cols[rows], np.ones((w, 1)), pr.t[rows, None] - pr.t[s]]
+        if extra is not None:
+            parts.insert(1, extra[rows])
+        A = np.concatenate(parts, axis=1)
         coef, *_ = np.linalg.lstsq(A, pr.tau_lp[rows, 0], rcond=None)
         ks.append(coef[0] if n == 1 else coef[0])
         starts.append(s)
@@ -166,12 +187,10 @@ def _switch_indicator(pr):
     full = np.repeat(ind_d, pr.D)[:pr.N]
     if full.size < pr.N:
         full = np.concatenate([full, np.full(pr.N - full.size, full[-1] if full.size else 0)])
-    pr._switch = full
-    pr._switch_changes = int(np.sum(np.abs(np.diff(ind_w))))
-    return full
+    return full, int(np.sum(np.abs(np.diff(ind_w))))
 
 
-def basis(pr, name, params):
+def basis(pr, name, params, partner=None):
     """(Nd, m) basis of the varying K and B on the decimated samples of ``pr`` (every
     D-th sample of the full rate, as the low-passed columns), and (Nd, q) quasi-static
     columns (state effects) or None.
@@ -182,18 +201,19 @@ def basis(pr, name, params):
     record) is computed once per record, and the last few bases are kept (a pair's search
     varies its second effect only: the first's basis is the same at every step). The
     arrays returned are shared: read them, never write."""
-    key = (name, tuple(sorted((k, repr(v)) for k, v in (params or {}).items())))
+    key = (name, tuple(sorted((k, repr(v)) for k, v in (params or {}).items())),
+           None if partner is None else partner[0])
     cache = pr.__dict__.setdefault("_varying_basis", {})
     if key in cache:
         return cache[key]
-    out = _basis(pr, name, params)
+    out = _basis(pr, name, params, partner)
     if len(cache) >= 4:
         cache.pop(next(iter(cache)))  # the oldest
     cache[key] = out
     return out
 
 
-def _basis(pr, name, params):
+def _basis(pr, name, params, partner=None):
     t = (np.arange(pr.N) / pr.fs)[::pr.D][:pr.Nd]
     if name == "stiffness_saturating":
         return (1.0 - np.exp(-t / float(params["time_constant_s"])))[:, None], None
@@ -201,7 +221,7 @@ def _basis(pr, name, params):
         a = 2 * math.pi * t / float(params["period_s"])
         return np.stack([np.sin(a), np.cos(a)], axis=1), None
     if name == "stiffness_switching":
-        return _switch_indicator(pr)[::pr.D][:pr.Nd, None], None
+        return _switch_indicator(pr, partner)[::pr.D][:pr.Nd, None], None
     x = _scaled_schedule(pr, name)[::pr.D][:pr.Nd]
     return np.stack([x, x * x], axis=1), np.stack([x, x * x, x ** 3], axis=1)
 

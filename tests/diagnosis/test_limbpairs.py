@@ -189,3 +189,31 @@ def test_the_pipeline_names_the_pair_in_report_json(tmp_path):
     assert "(stretch_reflex alone 99" in rep["summary"]
     assert "channel_delay adds" in rep["summary"]
     assert rep["pairs"][0]["second_effect_test"]["adds"] is True
+
+
+def test_a_switching_stiffness_under_a_switching_reflex_is_fitted_beside_it():
+    """labsim switching+reflex (seed 102): K switches 30 <-> 69 N m/rad and the reflex
+    gain with it. The local-K windows read beside the reflex's column find the switches,
+    and the pair varies the reflex's gain with the same indicator: the held-out reduction
+    of the pair is far above the reflex alone's (46 -> 82 % measured; before: the
+    switches were not found and the pair added nothing, -0.1 point)."""
+    import dataclasses
+
+    import labsim
+    spec = labsim.draw("switching+reflex", np.random.default_rng(102))
+    spec = dataclasses.replace(spec, record_reference=False, perturbation=dataclasses.replace(
+        spec.perturbation, kind="noise"))
+    trial = labsim.simulate(spec).trial
+    cfg = lf.FitConfig(n_jackknife=0)
+    preps = lf.prepare([lf.PositionRecord.from_trial(trial)], cfg)
+    nominal = lf.fit_nominal(preps, cfg)
+    single = lf.fit_effect(preps, "stretch_reflex", nominal, cfg, intervals=False)
+    prob, x, _ = lp.fit_second(lf, preps, single, "stiffness_switching", nominal, cfg)
+    pair = lp.finish(lf, preps, single, prob, x, nominal, cfg)
+    test = pair.as_dict()["second_effect_test"]
+    assert test["second_adds_points"] > 0.25, test
+    sw = pair.params["stiffness_switching"]
+    true_ratio = spec.limb.K_var.ratio
+    assert sw["level_ratio"] == pytest.approx(true_ratio, rel=0.25) or \
+        1 / sw["level_ratio"] == pytest.approx(true_ratio, rel=0.25), sw
+    assert sw["n_changes"] == 7, sw  # 60 s, a period of 16.2 s: switches at 8.1 s steps
