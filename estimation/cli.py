@@ -330,7 +330,7 @@ def grouping_line(trials, options) -> str:
 
 def print_label_note(trials) -> None:
     """One ``note: ...`` line on stderr (as the readers' notes) naming condition labels
-    that differ only by case or surrounding spaces
+    that differ only by case, spaces or a close spelling
     (estimation.grouping.near_duplicate_labels), if any."""
     from .grouping import near_duplicate_labels
     note = near_duplicate_labels(trials)
