@@ -214,12 +214,15 @@ def _truth(name, n):
     return None
 
 
-def _read(sources, options, torque_sign=None, scheduling=None):
+def _read(sources, options, torque_sign=None, scheduling=None, failures=None):
     """Read the trials; the readers' warnings (keys filled from the reference, an unknown
     format) go to stderr as one plain line each, not as Python warnings with source lines.
     ``torque_sign`` (+-1, ``--torque-sign``) replaces the sign the metadata declare;
     ``scheduling`` (``--scheduling NAME``) the declared scheduling variable (refused,
-    SchedulingError, where a trial has no usable variable of that name)."""
+    SchedulingError, where a trial has no usable variable of that name). With a
+    ``failures`` list, recordings shorter than one Welch segment among longer ones are
+    refused alone (appended as ``(label, message)``, left out of the trials returned);
+    without, or when every recording is short, they are refused (:func:`_check_lengths`)."""
     import trialformat as tf
     sources = [Path(s) for s in sources]
     trials = []
@@ -230,8 +233,11 @@ def _read(sources, options, torque_sign=None, scheduling=None):
             for t in got:
                 t.source_arg = s
             trials += got
-    _check_lengths(trials, options)
     _unique_names(trials)
+    refused = _check_lengths(trials, options, alone=failures is not None)
+    if refused:
+        failures += refused
+        trials = [t for t in trials if t.n_samples >= options.nperseg]
     if torque_sign is not None:
         for t in trials:
             _declare_torque_sign(t, torque_sign)
@@ -245,16 +251,29 @@ def _read(sources, options, torque_sign=None, scheduling=None):
     return trials
 
 
-def _check_lengths(trials, options) -> None:
+def _check_lengths(trials, options, alone: bool = False) -> list:
     """Refuse recordings shorter than one Welch segment (``--nperseg``), naming each and a
     segment that works: the largest power of two giving MIN_AVERAGES (8) averages at the
-    chosen overlap (estimator.nperseg_for, as the few-averages warning suggests)."""
+    chosen overlap (estimator.nperseg_for, as the few-averages warning suggests).
+
+    With ``alone``, when some recordings are long enough, each short one is refused
+    alone: returned as ``(label, message)``, its message advising to estimate it by
+    itself with that segment (a smaller --nperseg would change every recording's
+    analysis); else raised (TrialFormatError). An empty list when none is short."""
+    short = [t for t in trials if t.n_samples < options.nperseg]
+    if not short:
+        return []
+    if not alone or len(short) == len(trials):
+        raise _short_error(short, options)
+    return [(f"{t.name} (from {t.source_arg})", str(_short_error([t], options, alone=True)))
+            for t in short]
+
+
+def _short_error(short, options, alone: bool = False):
+    """The refusal of recordings ``short`` (fewer samples than one Welch segment)."""
     from .estimator import MIN_AVERAGES, nperseg_for
     from .spectral import WelchOptions
     w = options.welch()
-    short = [t for t in trials if t.n_samples < options.nperseg]
-    if not short:
-        return
     n = min(t.n_samples for t in short)
     frac = w["noverlap"] / w["nperseg"]
     hint = nperseg_for(n, WelchOptions(nperseg=w["nperseg"], noverlap=w["noverlap"],
@@ -268,12 +287,18 @@ def _check_lengths(trials, options) -> None:
                       f"{t.n_samples / t.fs:.4g} s" for t in short)
     import numpy as np
     if hint > n or hint >= options.nperseg:  # no segment fits: advice must not loop
-        raise tf.TrialFormatError(
+        return tf.TrialFormatError(
             f"{names}: too short for any spectral estimate (--nperseg {options.nperseg}; "
             f"the smallest segment is 16 samples, and {MIN_AVERAGES} Welch averages of it "
             f"need about {int(np.ceil(16 * (1 + (MIN_AVERAGES - 1) * (1 - frac))))} "
             f"samples): record longer")
-    raise tf.TrialFormatError(
+    if alone:  # the others are estimated: a smaller segment for all would change them
+        return tf.TrialFormatError(
+            f"{names}: fewer than one spectral segment (--nperseg {options.nperseg}): "
+            f"refused alone, the other recordings are estimated; to estimate it, give it "
+            f"alone with --nperseg {hint}{extra} ({MIN_AVERAGES} Welch averages of {n} "
+            f"samples), or record longer")
+    return tf.TrialFormatError(
         f"{names}: fewer than one spectral segment (--nperseg {options.nperseg}): use "
         f"--nperseg {hint}{extra} ({MIN_AVERAGES} Welch averages of {n} samples) or "
         f"longer recordings")
@@ -330,7 +355,7 @@ def grouping_line(trials, options) -> str:
 
 def print_label_note(trials) -> None:
     """One ``note: ...`` line on stderr (as the readers' notes) naming condition labels
-    that differ only by case or surrounding spaces
+    that differ only by case, spaces or a close spelling
     (estimation.grouping.near_duplicate_labels), if any."""
     from .grouping import near_duplicate_labels
     note = near_duplicate_labels(trials)
@@ -356,9 +381,9 @@ def run_estimate(args) -> int:
     options = options_from(args)
     if args.json is not None:
         _check_json_out(args.json)
-    trials = _read(args.source, options, args.torque_sign, args.scheduling)
+    failures = []  # recordings refused alone, then conditions the estimator refuses
+    trials = _read(args.source, options, args.torque_sign, args.scheduling, failures)
     print_scheduling(trials)
-    failures = []
     results = lab_results(trials, options, args.truth, failures)
     status = _report_failures(failures, results)
     grouping = grouping_line(trials, options)
@@ -518,11 +543,14 @@ def run_figures(args) -> int:
     options = options_from(args)
     # refused before any reading: a report replaces only its own earlier report
     tf.logs.check_report_out(args.out, args.folders, kinds=("lab", "paper"))
-    trials = _read(args.folders, options, args.torque_sign, args.scheduling)
+    refused = []  # recordings refused alone (shorter than one Welch segment)
+    trials = _read(args.folders, options, args.torque_sign, args.scheduling, refused)
     print_scheduling(trials)
     kind, status = args.kind, 0
     if kind == "auto":
         kind = "paper" if _paper_kind(trials) else "lab"
+    if kind == "paper" and refused:  # the paper's report reads the folders itself
+        raise tf.TrialFormatError("; ".join(message for _, message in refused))
     if kind == "paper":
         if options.reflex:
             print("note: --reflex applies to the lab report (--kind lab) of one-joint "
@@ -542,7 +570,7 @@ def run_figures(args) -> int:
     else:
         truth = "none" if args.truth == "auto" else args.truth
         from .labreport import write_lab_report
-        failures = []
+        failures = refused
         results = lab_results(trials, options, truth, failures)
         status = _report_failures(failures, results)
         grouping = grouping_line(trials, options)

@@ -124,34 +124,80 @@ def trial_sets(trials, *, pool: bool = False) -> list[TrialSet]:
     return sorted(sets, key=lambda s: s.label)
 
 
+#: difflib ratio at or above which two labels (case, spaces and punctuation removed) are
+#: taken for spellings of one another
+LABEL_SIMILARITY = 0.85
+
+
+def _bare_label(label: str) -> str:
+    """A label without case, spaces and punctuation (``"Co-Contract "`` -> ``cocontract``)."""
+    return "".join(c for c in label.casefold() if c.isalnum())
+
+
+def _labels_alike(a: str, b: str) -> bool:
+    """Whether two labels look like spellings of one label: equal but for case, spaces and
+    punctuation, or close (difflib ratio >= LABEL_SIMILARITY) with the same digits, so
+    ``relaxd``/``relaxed`` and ``cocontract``/``co contract`` are alike and ``PF10``/``PF20``
+    or ``day1``/``day2`` never are."""
+    import difflib
+    import re
+    x, y = _bare_label(a), _bare_label(b)
+    if x == y:
+        return True
+    if re.findall(r"\d+", x) != re.findall(r"\d+", y):
+        return False
+    return difflib.SequenceMatcher(None, x, y).ratio() >= LABEL_SIMILARITY
+
+
 def near_duplicate_labels(trials) -> str | None:
     """One note naming the ``condition`` labels of ``trials`` that differ only by case or
-    surrounding spaces (``"Relaxed"``, ``"relaxed "``, ``"relaxed"``), or None.
+    surrounding spaces (``"Relaxed"``, ``"relaxed "``, ``"relaxed"``), or look like
+    misspellings of one another (``relaxd``/``relaxed``, ``co-contarct``/``co-contract``,
+    ``cocontract``/``co contract``: :func:`_labels_alike`), or None.
 
     The grouping is unchanged: labels are compared as written, surrounding spaces
     ignored (:func:`condition_label`), so ``"relaxed "`` and ``"relaxed"`` are one set and
-    ``"Relaxed"`` another; the note says which are kept apart and which taken as one."""
-    spellings: dict = {}
+    ``"Relaxed"`` or ``"relaxd"`` another; the note says which are kept apart and which
+    taken as one."""
+    raws: list = []
     for t in trials:
         value = t.meta.get("condition")
-        if isinstance(value, str) and value.strip():
-            spellings.setdefault(value.strip().casefold(), {}).setdefault(value, None)
-    parts = []
-    for raw in (list(v) for v in spellings.values() if len(v) > 1):
+        if isinstance(value, str) and value.strip() and value not in raws:
+            raws.append(value)
+    group = list(range(len(raws)))  # union-find over the distinct spellings
+
+    def root(i):
+        while group[i] != i:
+            i = group[i]
+        return i
+    for i in range(len(raws)):
+        for j in range(i):
+            if root(i) != root(j) and _labels_alike(raws[i], raws[j]):
+                group[max(root(i), root(j))] = min(root(i), root(j))
+    clusters: dict = {}
+    for i, r in enumerate(raws):
+        clusters.setdefault(root(i), []).append(r)
+    parts, spelled = [], False
+    for raw in (v for v in clusters.values() if len(v) > 1):
         sets = list(dict.fromkeys(r.strip() for r in raw))
+        case_only = len({r.casefold() for r in sets}) == 1
+        spelled = spelled or not case_only
         said = ", ".join(repr(r) for r in raw)
         if len(sets) > 1:
+            why = ("case counts, surrounding spaces do not" if case_only else
+                   "labels are compared as written")
             what = (f"kept apart as {len(sets)} limb states ("
-                    + ", ".join(repr(x) for x in sets) + "; case counts, surrounding "
-                    "spaces do not)")
+                    + ", ".join(repr(x) for x in sets) + f"; {why})")
         else:
             what = f"taken as one ({sets[0]!r}: surrounding spaces do not count)"
         parts.append(f"{said}: {what}")
     if not parts:
         return None
-    return ("condition labels that differ only by case or surrounding spaces: "
-            + "; ".join(parts) + "; if they name one limb state, write one spelling in "
-            "every trial's metadata")
+    head = ("condition labels that differ only by case, spaces, punctuation or a close "
+            "spelling" if spelled else
+            "condition labels that differ only by case or surrounding spaces")
+    return (head + ": " + "; ".join(parts) + "; if they name one limb state, write one "
+            "spelling in every trial's metadata")
 
 
 def describe(sets) -> str:

@@ -883,6 +883,10 @@ def time_segments(trials, band, options) -> tuple[int, list[str]]:
     fs = trials[0].fs
     top = max_time_segments(n, band, options, fs)
     names = ", ".join(t.name for t in trials)
+    # the duration that limits the segments is the shortest recording's: name only those
+    limiting = [t.name for t in trials if t.n_samples == n]
+    shortest = ", ".join(limiting)
+    allows = "allows" if len(limiting) == 1 else "allow"
     why = (f"each time segment needs a Welch segment of at least {MIN_SEGMENT_NPERSEG} "
            f"samples with {4 * MIN_BAND_BINS} frequencies in the band {band[0]:.4g}-"
            f"{band[1]:.4g} Hz")
@@ -907,16 +911,17 @@ def time_segments(trials, band, options) -> tuple[int, list[str]]:
             return DEFAULT_TIME_SEGMENTS, []
         if top >= 2:
             return top, [f"{top} fixed time segments (results.json segments), not "
-                         f"{DEFAULT_TIME_SEGMENTS}: {names} ({n / fs:.4g} s) allows at most "
-                         f"{top} ({why})"]
-        return 0, [f"fixed time segments not fitted: {names} ({n / fs:.4g} s) is too short "
-                   f"for 2 time segments ({why})"]
+                         f"{DEFAULT_TIME_SEGMENTS}: {shortest} ({n / fs:.4g} s) {allows} at "
+                         f"most {top} ({why})"]
+        return 0, [f"fixed time segments not fitted: {shortest} ({n / fs:.4g} s) "
+                   f"{'is' if len(limiting) == 1 else 'are'} too short for 2 time segments "
+                   f"({why})"]
     if asked > top:
         largest = (f"the largest that works for it is --segments {top}" if top
                    else "it allows none (give --segments 0)")
         raise EstimationError(
-            f"--segments {asked}: more time segments than {names} ({n} samples, "
-            f"{n / fs:.4g} s) allows; {largest} ({why})")
+            f"--segments {asked}: more time segments than {shortest} ({n} samples, "
+            f"{n / fs:.4g} s) {allows}; {largest} ({why})")
     return asked, []
 
 

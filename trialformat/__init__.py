@@ -19,7 +19,7 @@ _EXPORTS = {
     "check_trial_out": ".logs", "column_names": ".logs",
     "default_metadata": ".logs", "read_trial": ".logs", "read_trials": ".logs",
     "required_columns": ".logs", "seal_simulated": ".logs", "trial_exists": ".logs", "trial_stem": ".logs",
-    "write_trial": ".logs",
+    "write_trial": ".logs", "misspelled_keys": ".logs",
     "is_mat": ".matlab", "read_trial_mat": ".matlab", "read_trials_mat": ".matlab",
     "write_trial_mat": ".matlab",
 }

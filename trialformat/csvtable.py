@@ -184,10 +184,16 @@ def _locate_error(path, header, delimiter, numeric, exc) -> None:
     with open_text(path) as fh:
         reader = csv.reader(fh, delimiter=delimiter)
         next(reader)
-        for row_no, row in enumerate(reader, start=1):
+        rows = (row for row in reader if row)  # blank lines: skipped, as pyarrow does
+        for row_no, row in enumerate(rows, start=1):
             if len(row) != len(header):
+                cut = ""
+                if len(row) < len(header) and next(rows, None) is None:
+                    cut = (": it is the last row, so the file looks cut short (a recording "
+                           "or export stopped mid-row); delete that row, or export the "
+                           "file again")
                 raise TrialFormatError(f"{path}: data row {row_no} has {len(row)} fields, the "
-                                       f"header has {len(header)}") from None
+                                       f"header has {len(header)}{cut}") from None
             for i, name in wanted.items():
                 cell = row[i].strip()
                 if cell.lower() in ("", "nan", "na", "n/a", "null"):

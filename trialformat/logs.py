@@ -492,9 +492,12 @@ def read_trial(path: str | os.PathLike, *, min_samples: int = MIN_SAMPLES) -> Tr
     if not csv_path.is_file():
         raise TrialFormatError(f"{csv_path}: data file missing")
     header, delimiter = csvtable.read_header(csv_path)
-    header = _rename_channels(header, meta, json_path, csv_path)
-    header, header_units = _header_units(header)
-    arrays = _columns(csv_path, header, delimiter, meta, filled)
+    try:
+        header = _rename_channels(header, meta, json_path, csv_path)
+        header, header_units = _header_units(header)
+        arrays = _columns(csv_path, header, delimiter, meta, filled)
+    except TrialFormatError as exc:
+        raise with_key_hints(exc, meta, filled, json_path) from None
     return finish_trial(meta, arrays, stem.name, filled, csv_path, min_samples=min_samples,
                         units=header_units)
 
@@ -569,9 +572,12 @@ def finish_trial(meta: dict, arrays: dict, name: str, filled: list, where, *,
     stated by ``units_by``) and the metadata's ``units`` key are applied first
     (trialformat.units: converted to SI, recorded in ``units_read``)."""
     from .units import apply_units
-    apply_units(meta, arrays, units or {}, where, by=units_by)
-    trial = Trial(meta=meta, name=name, filled_defaults=filled, **arrays)
-    check_trial(trial, where, min_samples=min_samples)
+    try:
+        apply_units(meta, arrays, units or {}, where, by=units_by)
+        trial = Trial(meta=meta, name=name, filled_defaults=filled, **arrays)
+        check_trial(trial, where, min_samples=min_samples)
+    except TrialFormatError as exc:
+        raise with_key_hints(exc, meta, filled, where) from None
     exact = np.arange(trial.n_samples) / trial.fs
     if not np.array_equal(trial.t, exact):
         trial.t_stored = trial.t
@@ -715,13 +721,95 @@ _CHOICES = {("perturbation", "kind"): ("torque", "position"),
 _CHOICE_HINTS = {"angles": " (absent: theta is the deviation from posture_deg)"}
 
 
+#: top-level metadata keys this project reads or writes (log-format.md); any other key is
+#: an extra key (allowed), named in a note only when it looks like a misspelling of these
+KNOWN_KEYS = ("format", "fs", "n_dof", "perturbed_dof", "posture_deg", "perturbation",
+              "controller", "sensors", "robot", "friction", "source", "condition", "angles",
+              "units", "units_read", "channels", "channels_read", "torque_sign",
+              "scheduling", "auxiliary", "simulation")
+#: keys of the nested objects besides those of the defaults (default_metadata)
+_KNOWN_SUBKEYS = {"perturbation": ("kind", "signal", "switch_s", "level", "peak"),
+                  "sensors": ("torque_sign", "torque_sampling"),
+                  "controller": ("tuning", "time_delay_estimation")}
+
+
+def _known_subkeys() -> dict:
+    out = {k: set(v) for k, v in _KNOWN_SUBKEYS.items()}
+    for n in (1, 2, 3):
+        for key, value in default_metadata(n).items():
+            if isinstance(value, dict):
+                out.setdefault(key, set()).update(value)
+    return {k: sorted(v) for k, v in out.items()}
+
+
+def _close_key(key: str, known) -> str | None:
+    """The known key ``key`` is probably a misspelling of (the same but for case, else the
+    closest by difflib at ratio >= 0.75), or None."""
+    import difflib
+    if not isinstance(key, str) or key in known:
+        return None
+    for k in known:
+        if k.lower() == key.lower():
+            return k
+    close = difflib.get_close_matches(key, list(known), n=1, cutoff=0.75)
+    return close[0] if close else None
+
+
+def misspelled_keys(meta: dict) -> list[tuple[str, str]]:
+    """``(key, known key)`` pairs, dotted for nested ones (``perturbation.levle``), of the
+    metadata's unknown keys that look like a misspelling of a known one: ``"perturbaton"``,
+    ``"sensor"``, ``"Fs"`` (for ``fs``). Extra keys far from every known one are not named."""
+    pairs = []
+    for key in meta:
+        right = _close_key(key, KNOWN_KEYS)
+        if right is not None:
+            pairs.append((key, right))
+    for group, subs in _known_subkeys().items():
+        holder = meta.get(group)
+        if isinstance(holder, dict):
+            for key in holder:
+                right = _close_key(key, subs)
+                if right is not None:
+                    pairs.append((f"{group}.{key}", f"{group}.{right}"))
+    return pairs
+
+
+def with_key_hints(exc: TrialFormatError, meta: dict, filled, where) -> TrialFormatError:
+    """``exc`` with a note for each misspelled key whose intended key was absent (filled
+    from the defaults): the refusal may be caused by the default, not by the data."""
+    said = [(w, r) for w, r in misspelled_keys(meta) if r in (filled or ())]
+    if not said:
+        return exc
+    name = Path(str(where)).name
+    if name.lower().endswith((".csv", ".csv.gz")):  # the keys are the JSON's
+        name = with_ending(trial_stem(name), ".json").name
+    notes = "; ".join(f"{name} has the unknown key '{w}': did you mean '{r}'? ('{r}' is "
+                      f"absent, so its default was used)" for w, r in said)
+    return exc.__class__(f"{exc}; {notes}")
+
+
 def complete_metadata(meta: dict, where) -> list[str]:
     """Check the metadata keys and fill absent ones from the reference, in place.
 
     Integer keys written as integral floats (``2.0``, MATLAB doubles) become ints; 2.5 is
     refused. Shared by the readers of other containers (``.mat``). Returns the keys
-    filled; raises TrialFormatError naming ``where``.
+    filled; raises TrialFormatError naming ``where``. An unknown key that looks like a
+    misspelling of a known one (``"perturbaton"``) is named in a warning, and in a refusal
+    that the default of the intended key may have caused.
     """
+    name = Path(str(where)).name
+    for wrong, right in misspelled_keys(meta):
+        warnings.warn(f"{name}: unknown key '{wrong}': did you mean '{right}'?",
+                      stacklevel=3)
+    filled: list[str] = []
+    try:
+        _complete_metadata(meta, where, filled)
+    except TrialFormatError as exc:
+        raise with_key_hints(exc, meta, filled, where) from None
+    return filled
+
+
+def _complete_metadata(meta: dict, where, filled: list) -> None:
     _integral(meta, "n_dof", where, default=2)
     n_dof = meta.get("n_dof", 2)
     if not 1 <= n_dof <= MAX_DOF:
@@ -737,7 +825,6 @@ def complete_metadata(meta: dict, where) -> list[str]:
     if isinstance(meta.get("perturbation"), dict) and \
             meta["perturbation"].get("kind") == "position":
         del defaults["perturbation"]  # the torque perturbation's keys do not apply
-    filled = []
     for key, value in defaults.items():
         if key not in meta:
             meta[key] = value
@@ -774,8 +861,7 @@ def complete_metadata(meta: dict, where) -> list[str]:
         _check_cutoff(meta, where)  # a filled reference value is not the lab's to fix
     if meta.get("format") != FORMAT:
         warnings.warn(f"{Path(str(where)).name}: unknown format {meta.get('format')!r} "
-                      f"(this reader knows {FORMAT!r}); read as {FORMAT}", stacklevel=3)
-    return filled
+                      f"(this reader knows {FORMAT!r}); read as {FORMAT}", stacklevel=4)
 
 
 def _check_posture(meta: dict, n_dof: int, filled: bool, where) -> None:
