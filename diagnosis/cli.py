@@ -121,6 +121,9 @@ def _diagnose(args) -> int:
         head = "" if condition is None else f"[{condition}] "
         print(f"{head}verdict: {one.verdict}{': ' + named if named else ''}")
         print(one.summary)
+        from .report import scheduling_line
+        for u in getattr(one, "scheduling", None) or []:
+            print(f"{head}{scheduling_line(u)}")
         feat = one.gap.get("features")
         if feat:  # an experiment with its own fit measure (position servo: limbfit)
             print(f"{head}nominal gap {one.gap['nominal_all']:.3g} (threshold "

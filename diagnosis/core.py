@@ -87,6 +87,9 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         from trialformat.scheduling import request
         for t in trials:
             request(t, scheduling)
+    # the scheduling variable of each trial and whether the state-varying effects may use
+    # it: the same refusal as estimate's parameter-varying fit (trialformat.scheduling)
+    options["scheduling"] = _scheduling_usage(trials, requested=scheduling is not None)
     groups = split_conditions(trials)
     # the rule estimate and figures follow too, said in one line of each report
     options["grouping"] = describe(trial_sets(trials))
@@ -122,6 +125,29 @@ def diagnose(source, out_dir=None, *, config: DiagnosisConfig = DiagnosisConfig(
         result.out_dir = Path(out_dir)
         write_set_index(result, out_dir)
     return result
+
+
+def _scheduling_usage(trials, requested: bool = False) -> list:
+    """trialformat.scheduling.usage of every trial that has a scheduling variable; a
+    named variable refused for a varying fit is warned about with estimate's notice."""
+    import warnings
+
+    from trialformat.errors import SchedulingError
+    from trialformat.scheduling import usage
+    out = []
+    for t in trials:
+        try:
+            u = usage(t)
+        except SchedulingError:  # a malformed declaration: the state effects go without
+            continue
+        if u is None:
+            continue
+        if requested:  # --scheduling NAME (request wrote it into the metadata)
+            u["how"] = "requested"
+        if u["refusal"] and u["how"] != "default":
+            warnings.warn(u["refusal"], stacklevel=3)
+        out.append(u)
+    return out
 
 
 def _safe(name: str) -> str:

@@ -175,6 +175,8 @@ class PositionRecord:
             rec.scheduling = sch.scheduling_of(trial)
         except Exception:  # noqa: BLE001 - an auxiliary variable never sinks a file
             rec.scheduling = None
+        if rec.scheduling is not None and sch.varying_refusal(rec.scheduling, trial.name):
+            rec.scheduling = None  # refused as estimate refuses it (diagnose warns)
         return rec
 
 

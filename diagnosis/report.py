@@ -49,6 +49,9 @@ class DiagnosisReport:
     alternatives: list = field(default_factory=list)
     #: how the trials were grouped, in one line (estimation.grouping.describe)
     grouping: str = ""
+    #: the scheduling variable of each trial (trialformat.scheduling.usage: name, units,
+    #: source, range, whether the state-varying effects used it, the refusal)
+    scheduling: list = field(default_factory=list)
     #: the named model in full: K, B, I and the effect's parameters, each [value, low,
     #: high] (pipeline.report.named_model); None when nothing is named
     named_model: dict | None = None
@@ -68,7 +71,8 @@ class DiagnosisReport:
                 "trials": self.trials, "experiment": self.experiment,
                 "n_simulations": self.n_simulations,
                 "elapsed_s": self.elapsed_s, "config": self.config,
-                "grouping": self.grouping}
+                "grouping": self.grouping,
+                "scheduling": list(self.scheduling)}
 
 
 FIGURES = {"where": "gap_where.png", "ranking": "gap_ranking.png",
@@ -159,6 +163,18 @@ def _pct(share) -> str:
     return pct(share)
 
 
+def scheduling_line(u) -> str:
+    """One line on a trial's scheduling variable (a trialformat.scheduling.usage entry):
+    name, units, source and range, and whether the state-varying effects used it."""
+    units = f" {u['units']}" if u.get("units") else ""
+    shown = f" [{u['units']}]" if u.get("units") else " (units not stated)"
+    lo, hi = u["range"]
+    head = (f"Scheduling variable of {u['trial']}: {u['name']}{shown} ({u['source']}, "
+            f"{u['how']}): {lo:.4g}..{hi:.4g}{units}")
+    return head + ("; used by the state-varying effects" if u.get("used") else
+                   f"; not used: {u.get('refusal')}")
+
+
 def markdown(report) -> str:
     """The report page (Markdown)."""
     g = report.gap
@@ -167,6 +183,7 @@ def markdown(report) -> str:
     lines = [f"# Sim-to-real gap diagnosis", "",
              f"Trials: {', '.join(report.trials)}", "",
              *([report.grouping, ""] if report.grouping else []),
+             *[x for u in (report.scheduling or []) for x in (scheduling_line(u), "")],
              f"Experiment: {exp.get('class', '-')} ({exp.get('title', '-')})"
              + (f"; effects not applicable to it: {', '.join(exp['effects_not_applicable'])}"
                 if exp.get("effects_not_applicable") else "") + ".", "",

@@ -32,7 +32,7 @@ def varying_of_trials(trials, options) -> tuple[list, list]:
     moves beyond its perturbation (not :func:`trialformat.scheduling.narrow_range`), and
     one warning per trial whose named variable could not be used (the time-invariant
     estimate is kept). ``options``: AnalysisOptions (its ``reflex``)."""
-    from trialformat.scheduling import narrow_range
+    from trialformat.scheduling import varying_refusal
     from .reflex import ReflexOptions
     from .varying import VaryingError, fit_varying
     fits, notes = [], []
@@ -51,13 +51,10 @@ def varying_of_trials(trials, options) -> tuple[list, list]:
                 notes.append(f"parameter-varying fit not done for {t.name}: it is for one "
                              f"joint; {t.name!r} has {t.n_dof}")
             continue
-        why = None if s.name == "time" else narrow_range(s)
-        if why:
+        refusal = varying_refusal(s, t.name)  # the same refusal as diagnose's
+        if refusal:
             if named:
-                notes.append(f"scheduling variable {s.name!r} of {t.name}: range too narrow "
-                             f"for a parameter-varying fit ({why}): the time-invariant "
-                             f"estimate is kept; a variable the joint's state moves through "
-                             f"(time, angle, or one spanning more) would work")
+                notes.append(refusal)
             continue
         try:
             fit = fit_varying(t.theta[:, 0], t.tau_h[:, 0], s.values, t.fs, name=s.name,

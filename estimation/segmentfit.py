@@ -155,7 +155,7 @@ class _Sums:
 def segment_track(theta, tau, fs, *, window_s=WINDOW_S, band_hz=BAND_HZ, alpha=ALPHA,
                   refine_band_hz=REFINE_BAND_HZ,
                   step_s=STEP_S, search_s=SEARCH_S, min_segment_s=None,
-                  guard_s=GUARD_S, sign=None, passes=2) -> SegmentTrack:
+                  guard_s=GUARD_S, sign=1, passes=2) -> SegmentTrack:
     """Piecewise-constant K, B, I of one joint (module docstring).
 
     Parameters
@@ -169,7 +169,9 @@ def segment_track(theta, tau, fs, *, window_s=WINDOW_S, band_hz=BAND_HZ, alpha=A
     min_segment_s : change points closer than this [s] are merged (None: MIN_BLOCK
         windows, the shortest level the window test sees)
     guard_s : samples left out of each segment's fit next to a change [s]
-    sign : +1 / -1 on the torque; None: the sign that makes the whole record's K positive
+    sign : +1 / -1 on the torque (default +1: the torque as given, the declared sign
+        already applied, as estimation.timevarying.track); None: the sign that makes the
+        whole record's K positive
     passes : sweeps of the one-at-a-time refinement
 
     Returns

@@ -137,7 +137,7 @@ def format_p(p: float) -> str:
 # ----------------------------------------------------------------------------- the track
 
 
-def track(theta, tau, fs, *, window_s=WINDOW_S, band_hz=BAND_HZ, sign=None) -> dict:
+def track(theta, tau, fs, *, window_s=WINDOW_S, band_hz=BAND_HZ, sign=1) -> dict:
     """K, B, I per window of one joint.
 
     Parameters
@@ -146,8 +146,11 @@ def track(theta, tau, fs, *, window_s=WINDOW_S, band_hz=BAND_HZ, sign=None) -> d
     fs : sampling rate [Hz]
     window_s : window length [s]
     band_hz : (lo, hi) of the band-pass applied to both [Hz] (hi capped at 0.4 fs)
-    sign : +1 / -1 multiplies the torque; None: the sign that makes the whole record's
-        K positive (the torque-sign convention is the estimate's other check)
+    sign : +1 / -1 multiplies the torque (default +1: the torque as given, i.e. with the
+        sign the trial's metadata or --torque-sign declared already applied by the reader,
+        so the blocks' K has the sign of the command's estimate); None: the sign that
+        makes the whole record's K positive (a caller's explicit choice only: it would
+        print a positive K beside a negative estimate of the same torque)
 
     Returns ``{"t": (W,) window centres [s], "K", "B", "I": (W,), "window_s", "sign"}``.
 
@@ -304,7 +307,7 @@ def change_points(x, threshold, intervals) -> list:
 
 
 def time_variation(theta, tau, fs, *, window_s=WINDOW_S, band_hz=BAND_HZ, alpha=ALPHA,
-                   min_change=MIN_CHANGE, sign=None, name="") -> TimeVariation:
+                   min_change=MIN_CHANGE, sign=1, name="") -> TimeVariation:
     """Test one joint's recording for a changing K, B or I (module docstring).
 
     Parameters as :func:`track`; ``alpha`` the family-wise false-alarm rate (Bonferroni

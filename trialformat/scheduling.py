@@ -170,6 +170,39 @@ def check_range(sched: Scheduling, trial=None, **kw) -> None:
                               f"estimate, or choose another (--scheduling NAME)")
 
 
+def varying_refusal(sched: Scheduling, trial_name: str) -> str | None:
+    """The one refusal of a scheduling variable for a parameter-varying fit, shared by
+    ``armimp estimate`` (estimation.pvlab) and ``armimp diagnose`` (its state-varying
+    effects): the notice naming the variable, the trial and why (its range too narrow,
+    :func:`narrow_range`; ``time`` is never refused), or None when the variable can be
+    used."""
+    why = None if sched.name == "time" else narrow_range(sched)
+    if not why:
+        return None
+    return (f"scheduling variable {sched.name!r} of {trial_name}: range too narrow for a "
+            f"parameter-varying fit ({why}): the time-invariant estimate is kept; a "
+            f"variable the joint's state moves through (time, angle, or one spanning more) "
+            f"would work")
+
+
+def usage(trial) -> dict | None:
+    """What a command did with ``trial``'s scheduling variable, for its reports:
+    ``{"trial", "name", "units", "source", "range": [min, max], "how": "requested" |
+    "declared" | "default", "used": bool, "refusal": notice or None}``;
+    None for a stationary recording (no variable). A named variable that cannot be read
+    raises SchedulingError as :func:`scheduling_of`."""
+    s = scheduling_of(trial)
+    if s is None:
+        return None
+    refusal = varying_refusal(s, trial.name)
+    declared = (trial.meta or {}).get("scheduling")
+    how = "default" if s.note is not None else (
+        "declared" if declared is not None else "requested")
+    lo, hi = float(np.min(s.values)), float(np.max(s.values))
+    return {"trial": trial.name, "name": s.name, "units": s.units, "source": s.source,
+            "range": [lo, hi], "how": how, "used": refusal is None, "refusal": refusal}
+
+
 def scheduling_of(trial, requested: str | None = None) -> Scheduling | None:
     """The scheduling variable of ``trial`` (resolution order: module docstring).
 

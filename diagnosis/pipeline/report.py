@@ -70,6 +70,7 @@ def build(r) -> DiagnosisReport:
                "held_out": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
                             for u in r.held]},
         config=r.config.to_dict(), grouping=r.grouping,
+        scheduling=[u for u in r.scheduling if u["trial"] in {t.name for t in r.trials}],
         n_simulations=n_parent_sims + r.n_worker_sims,
         elapsed_s=time.perf_counter() - r.t0, trials=[t.name for t in r.trials],
         experiment={**r.experiment.describe(), "simulated_by": simulated_by(r),

@@ -30,6 +30,7 @@ class DiagnosisRun:
     scheduler: object = None
     rk4_step: float | None = None
     grouping: str = ""             # the one line of the grouping rule (estimation.grouping)
+    scheduling: list = field(default_factory=list)  # trialformat.scheduling.usage per trial
     t0: float = field(default_factory=time.perf_counter)
     resume: object = None          # pipeline.resume.ResumeStore or None
     # read, conventions
