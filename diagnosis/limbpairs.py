@@ -490,9 +490,6 @@ def _reported(lf, preps, name, params, coef, layout):
         if name == "stiffness_switching" and last is not None and any(
                 isinstance(v, slice) and k.endswith(":partner_gain") for k, v in layout.items()):
             out["n_changes"] = float(pr._switch_partnered[last][1])  # read beside the partner
-        g = layout.get(name + ":partner_gain")
-        if g is not None:  # the partner's gain on the same basis [its gain's units]
-            out["partner_gain_coefficients"] = [float(v) for v in coef[g]]
         return out
     e = cat.get_effect(name)
     lin = {k: float(coef[layout[name]][i]) for i, k in enumerate(lf.LINEAR.get(name, ()))}
