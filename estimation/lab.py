@@ -757,6 +757,15 @@ def _variants(band, df):
             (lo + max(0.1 * width, 4 * df), hi)]
 
 
+#: a parameter is band-sensitive only when some variant also moves it by more than this
+#: fraction of its value: 1 % is below what matters in practice (repeated lab measurements
+#: of joint K, B, I scatter by 10 % and more between trials and days; the reported digits
+#: carry 3-4 significant figures) and above the few-per-mille moves that a statistically
+#: "significant" but tiny misfit produces when the intervals are very narrow (clean or
+#: long records: I = 0.015 +- 1e-6 moving over 0.014995...0.015001, 0.03 %)
+BAND_MIN_SPREAD = 0.01
+
+
 def sensitivity(estimate, fit, fit_kw, options, found=None) -> dict:
     """How far M, B, K move over reasonable band and weighting choices.
 
@@ -766,7 +775,8 @@ def sensitivity(estimate, fit, fit_kw, options, found=None) -> dict:
     Returns ``{"variants": [{"band_hz", "weighting", "M", "B", "K", "M_ci", ...}],
     "range": {p: [min, max] (n, n) lists}, "exceeds": {p: (n, n) bools}}``: ``exceeds``
     is True where some variant differs from the fit by more than both its own and the
-    fit's confidence half-width (a systematic dependence on the choice, not noise).
+    fit's confidence half-width (a systematic dependence on the choice, not noise) and
+    by more than :data:`BAND_MIN_SPREAD` of the fitted value (a dependence that matters).
     """
     df = float(estimate.f[1] - estimate.f[0])
     band = estimate.band_hz
@@ -791,7 +801,9 @@ def sensitivity(estimate, fit, fit_kw, options, found=None) -> dict:
         rng[p] = [vals.min(axis=0).tolist(), vals.max(axis=0).tolist()]
         ex = np.zeros(main.shape, bool)
         for v in variants:
-            ex |= np.abs(np.asarray(v[p]) - main) > np.maximum(ci, np.asarray(v[f"{p}_ci"]))
+            d = np.abs(np.asarray(v[p]) - main)
+            ex |= (d > np.maximum(ci, np.asarray(v[f"{p}_ci"]))) & \
+                (d > BAND_MIN_SPREAD * np.abs(main))
         exceeds[p] = ex.tolist()
     return {"variants": variants, "range": rng, "exceeds": exceeds}
 

@@ -221,6 +221,25 @@ def test_a_model_that_does_not_hold_is_band_sensitive():
     assert hi - lo > 2 * r.fit.K_ci[0, 0]
 
 
+def test_a_practically_irrelevant_band_dependence_is_not_flagged():
+    """A reflex-like stiffness of 0.3 N m/rad (0.2 % of K) with almost no noise: K moves
+    with the band beyond its tiny interval, but by far less than BAND_MIN_SPREAD of its
+    value, so nothing is flagged (it was: "I = 0.015 +- 9.6e-07 moves over 0.014995...")."""
+    from estimation.lab import BAND_MIN_SPREAD
+    n = 60_000
+    f, X, x, dx, ddx = _angle(n, 31, 0.0, 40.0)
+    s = 2j * np.pi * f
+    extra = np.fft.irfft(X * 0.3 / (1 + s / (2 * np.pi * 3.0)), n)
+    tau = ANKLE["K"] * x + ANKLE["B"] * dx + ANKLE["I"] * ddx + extra + \
+        1e-5 * np.random.default_rng(32).standard_normal(n)
+    r = analyse(Unit("a", [_trial(x, tau)], ""))
+    lo, hi = r.sensitivity["range"]["K"][0][0][0], r.sensitivity["range"]["K"][1][0][0]
+    assert hi - lo > 2 * r.fit.K_ci[0, 0]                  # statistically it moves...
+    assert hi - lo < BAND_MIN_SPREAD * r.fit.K[0, 0]       # ...by a negligible amount
+    assert not any(w.startswith("band-sensitive") for w in r.warnings), r.warnings
+    assert "band-sensitive" not in r.flags
+
+
 # ----------------------------------------------------------------------------- plots
 
 
