@@ -374,6 +374,7 @@ def _fit_layout(fig, texts, width, axes_h) -> None:
     renderer = fig.canvas.get_renderer()
     dpi = fig.dpi
     pad = 0.08
+    _wrap_title(fig._suptitle, renderer, width * dpi * 0.96)
     heights = [t.get_window_extent(renderer).height / dpi for t in texts]
     title_h = fig._suptitle.get_window_extent(renderer).height / dpi + pad
     bottom = sum(heights) + pad * (len(texts) + 1)
@@ -390,6 +391,27 @@ def _fit_layout(fig, texts, width, axes_h) -> None:
     fig._suptitle.set_va("top")
     fig.tight_layout(rect=(0, bottom / height, 1, 1 - title_h / height), pad=0.3,
                      h_pad=0.6)
+
+
+def _wrap_title(text, renderer, max_px) -> None:
+    """Break ``text`` (a title) after its ", " so that no line is wider than ``max_px``
+    pixels: a long label or parameters with many digits (``I = 0.01499999 ± 0.0000008``)
+    were clipped on both sides of the figure. A single piece still too wide shrinks the
+    font (down to 6 pt)."""
+    if text.get_window_extent(renderer).width <= max_px:
+        return
+    pieces = re.split(r"(?<=, )|(?<=: )", text.get_text())
+    lines = [""]
+    for piece in pieces:
+        text.set_text((lines[-1] + piece).rstrip())
+        if lines[-1] and text.get_window_extent(renderer).width > max_px:
+            lines.append(piece)
+        else:
+            lines[-1] += piece
+    text.set_text("\n".join(line.rstrip() for line in lines))
+    text.set_multialignment("center")
+    while text.get_window_extent(renderer).width > max_px and text.get_fontsize() > 6:
+        text.set_fontsize(text.get_fontsize() - 0.5)
 
 
 def _title(result) -> str:

@@ -109,6 +109,21 @@ def test_one_joint_inertia_is_I_in_table_and_bode():
     assert "+-" not in caption + title and "±" in title
 
 
+def test_a_long_bode_title_fits_inside_the_figure():
+    """A long label and many digits (co-contract: "K = 249.993 ... I = 0.01499999 ±
+    0.0000008") were clipped on both sides: the title wraps to fit the figure."""
+    r = _ankle()
+    r.label = "subject 07, right ankle, condition co-contract, trials 1-6, session 2"
+    fig = bode(r)
+    renderer = fig.canvas.get_renderer()
+    box, title = fig.bbox, fig._suptitle.get_window_extent(renderer)
+    assert box.x0 <= title.x0 and title.x1 <= box.x1, (title, box)
+    assert box.y0 <= title.y0 and title.y1 <= box.y1, (title, box)
+    assert "K = " in fig._suptitle.get_text() and "I = " in fig._suptitle.get_text()
+    import matplotlib.pyplot as plt
+    plt.close(fig)
+
+
 def test_three_joint_bode_is_a_grid_with_phase_masked_out_of_band():
     trials = [synthetic_trial(perturbed_dof=k, arm=ARM_3DOF, controller=CONTROLLER_3DOF,
                               peak=PEAK_3DOF, seed=10 + k, duration_s=20.0,
