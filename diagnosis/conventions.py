@@ -76,6 +76,29 @@ class Finding:
             "; corrected" if self.corrected else "")
 
 
+def merged_texts(findings) -> list[str]:
+    """The findings' texts with repeats said once (README: a repeated note is said once
+    with its count), in first order: the same finding on several trials (``declared:
+    torque_sign -1`` on each of 10 files) reads ``name (10 trials: a, b, c, ...):
+    evidence``; an identical text repeated reads ``text (x N)``."""
+    groups: dict = {}
+    for f in findings:
+        key = (f.name, f.evidence, f.corrected)
+        groups.setdefault(key, []).append(f.where)
+    out = []
+    for (name, evidence, corrected), places in groups.items():
+        distinct = list(dict.fromkeys(places))
+        if len(distinct) == 1:
+            where = distinct[0]
+        else:
+            shown = ", ".join(distinct[:3]) + (", ..." if len(distinct) > 3 else "")
+            where = f"{len(distinct)} trials: {shown}"
+        text = Finding(name, where, evidence, corrected).text()
+        repeats = len(places) // len(distinct)
+        out.append(text + (f" (x {repeats})" if repeats > 1 else ""))
+    return out
+
+
 def _replace(trial, scale=None, offset=None, **arrays):
     """A corrected copy; its storage context is the raw trial's, seen through the
     correction corrected = raw * scale - offset (per signal), so that simulations are

@@ -8,6 +8,7 @@ import math
 
 from .. import catalogue as cat
 from .. import ties as tie_rule
+from ..conventions import merged_texts
 from ..config import (VERDICT_CONVENTION, VERDICT_EFFECT, VERDICT_NONE, VERDICT_PARTLY,
                       VERDICT_UNEXPLAINED, DiagnosisConfig)
 from ..fitting import EffectFit
@@ -69,12 +70,12 @@ def run(r) -> None:
     mismatches = [f for f in mismatches if f not in stored]
     if stored:
         summary += (" Storage finding, corrected (it does not change the verdict): "
-                    + "; ".join(f.text() for f in stored) + ".")
+                    + "; ".join(merged_texts(stored)) + ".")
     if mismatches:
         if verdict == VERDICT_NONE:
             verdict = VERDICT_CONVENTION
         summary = ("set-up/convention mismatch found and corrected: "
-                   + "; ".join(f.text() for f in mismatches) + ". After correction: "
+                   + "; ".join(merged_texts(mismatches)) + ". After correction: "
                    + summary)
     r.alternative_rows = alternatives_of(r, chosen) if named else []
     r.indistinguishable = tie_rule.indistinguishable(r.alternative_rows, named)

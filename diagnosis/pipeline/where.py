@@ -7,13 +7,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import AMPLITUDE_GAP
+from ..conventions import merged_texts
 from ..evaluation import storage_context
 from ..gap import GapResult
 
 
 def run(r) -> None:
     """Fill ``r.where`` (keys documented in docs/diagnosis.md)."""
-    r.where = {"conventions": [f.text() for f in r.findings],
+    r.where = {"conventions": merged_texts(r.findings),  # a repeat said once, counted
                "storage": {t.name: storage_context(t).describe() for t in r.trials},
                "grid": grids(r.trials, r.experiment),
                "nominal": where_breakdown(r.nominal_all),
