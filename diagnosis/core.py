@@ -151,7 +151,10 @@ def _scheduling_usage(trials, requested: bool = False) -> list:
 
 
 def _safe(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_" else "_" for c in str(name)) or "condition"
+    """A condition's report folder: the file-name form ``figures`` uses too
+    (estimation.grouping.safe_name), so ``"PF 10%"`` is ``PF_10`` in both."""
+    from estimation.grouping import safe_name
+    return safe_name(name, "condition")
 
 
 class DiagnosisSet:

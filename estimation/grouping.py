@@ -19,6 +19,7 @@ the same joint. The tools say the outcome in one line (:func:`describe`).
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 
 from .errors import EstimationError
@@ -206,6 +207,14 @@ def describe(sets) -> str:
     parts = [f"{s.label} ({'label' if s.labelled else 'unlabelled'}, {len(s.trials)} "
              f"trial{'s' if len(s.trials) != 1 else ''})" for s in sets]
     return f"grouping: {len(sets)} set(s): {', '.join(parts)}; {RULE}"
+
+
+def safe_name(label: str, default: str = "result") -> str:
+    """The file-name form of a label, one for every tool (``figures``' ``frf_PF_10`` and
+    ``diagnose``'s folder ``PF_10`` for ``"PF 10%"``): runs of characters other than ASCII
+    letters, digits and ``._+-`` become one ``_``, leading and trailing ``_`` dropped;
+    ``default`` when nothing is left."""
+    return re.sub(r"[^A-Za-z0-9._+-]+", "_", str(label)).strip("_") or default
 
 
 def unique_file_names(labels, safe) -> tuple[list[str], list[str]]:

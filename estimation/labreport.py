@@ -43,9 +43,7 @@ from .lab import (COHERENT, FRF_UNITS, MIN_RUN_BINS, UNITS, WEIGHTING_TEXT,  # n
 from .numbers import at_decimals, decimals_of, plus_minus  # noqa: E402
 
 
-def safe_name(label: str) -> str:
-    """A file-name-safe form of a label."""
-    return re.sub(r"[^A-Za-z0-9._+-]+", "_", label).strip("_") or "result"
+from .grouping import safe_name  # noqa: E402,F401  the one label-to-file-name rule
 
 
 def write_lab_report(results, out, *, options=None, grouping=None) -> list[str]:

@@ -142,10 +142,19 @@ def test_colliding_labels_get_unique_report_folders():
     from estimation.grouping import unique_file_names
     from estimation.labreport import safe_name
     labels = ["day1/left", "day1_left", "Sübject", "Söbject"]
-    for safe, renamed in ((_safe, 1), (safe_name, 2)):
+    for safe, renamed in ((_safe, 2), (safe_name, 2)):
         names, notes = unique_file_names(labels, safe)
         assert len({n.lower() for n in names}) == 4, names
         assert len(notes) == renamed and "day1_left_2" in notes[0]
+
+
+def test_figures_and_diagnose_name_a_label_alike():
+    """"PF 10%" was frf_PF_10 from figures but folder PF_10_ from diagnose."""
+    from diagnosis.core import _safe
+    from estimation.labreport import safe_name
+    for label in ("PF 10%", "co-contract", "day1/left", "Sübject", "a  b"):
+        assert _safe(label) == safe_name(label), label
+    assert _safe("PF 10%") == "PF_10"
 
 
 def test_diagnose_refuses_a_read_only_out_before_any_work(tmp_path):
