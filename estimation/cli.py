@@ -334,9 +334,15 @@ def lab_results(trials, options, truth_name="none", failures=None):
     estimator refuses (EstimationError: too few segments, a joint without a trial...) is
     appended to it as ``(label, message)`` and the others go on; without, it raises."""
     from .errors import EstimationError
-    from .lab import analyse, estimation_units
+    from .lab import analyse, degree_outliers, estimation_units
     results = []
     for unit in estimation_units(trials, pool=options.pool):
+        odd = degree_outliers(unit)  # per recording, before the set is pooled
+        if odd:
+            if failures is None:
+                raise EstimationError("; ".join(message for _, message in odd))
+            failures += [(t.name, message) for t, message in odd]
+            unit.trials = [t for t in unit.trials if all(t is not o for o, _ in odd)]
         truth = _truth(truth_name, unit.trials[0].n_dof)
         try:
             results.append(analyse(unit, options, truth=truth))
