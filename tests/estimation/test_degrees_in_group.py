@@ -29,6 +29,7 @@ def test_a_recording_in_degrees_is_refused_alone_the_group_estimated(tmp_path, c
     k = float(cap.out.split("K=")[1].split("±")[0])
     assert abs(k - 80) < 4, cap.out  # the three in radians, not a pooled 1.48
     assert "suggested band" not in cap.out and "angles in degrees" not in cap.out
+    assert "relaxed (label, 3 trials)" in cap.out and "trials=r0, r1, r2 " in cap.out
 
 
 def test_unit_advice_names_theta_ref_and_no_band_advice(tmp_path):
