@@ -332,10 +332,21 @@ def _unique_names(trials) -> None:
 def lab_results(trials, options, truth_name="none", failures=None):
     """Analyse every recording or condition. With a ``failures`` list, a condition the
     estimator refuses (EstimationError: too few segments, a joint without a trial...) is
-    appended to it as ``(label, message)`` and the others go on; without, it raises."""
+    appended to it as ``(label, message)`` and the others go on; without, it raises.
+    A recording whose angles look like degrees beside the radians of its set
+    (lab.degree_outliers) is refused alone the same way and removed from ``trials``."""
     from .errors import EstimationError
-    from .lab import analyse, estimation_units
+    from .lab import analyse, degree_outliers, estimation_units
     results = []
+    # per recording, before a set is pooled: one in degrees among radians is refused
+    # alone and left out of ``trials`` (in place: the grouping line then names the rest)
+    odd = [o for unit in estimation_units(trials, pool=options.pool)
+           for o in degree_outliers(unit)]
+    if odd:
+        if failures is None:
+            raise EstimationError("; ".join(message for _, message in odd))
+        failures += [(t.name, message) for t, message in odd]
+        trials[:] = [t for t in trials if all(t is not o for o, _ in odd)]
     for unit in estimation_units(trials, pool=options.pool):
         truth = _truth(truth_name, unit.trials[0].n_dof)
         try:

@@ -461,7 +461,9 @@ def analyse(unit: Unit, options: AnalysisOptions | None = None, *, truth=None) -
         w.split(":")[0].split(" Z")[0] for w in result.warnings
         if w.startswith(("non-physical", "poor fit", "torque sign", "time-varying",
                          "band-sensitive"))))
-    result.warnings += band_suggestion(result, options)
+    if not any(w.startswith("angles in degrees?") for w in result.warnings):
+        # a band cannot mend an angle's unit: advice on top of the unit's would mislead
+        result.warnings += band_suggestion(result, options)
     if options.reflex:
         # the K-B-I result stands whatever the reflex fit can do with these trials
         from .reflex import reflex_of_trials
@@ -1027,6 +1029,64 @@ DEGREES_LIMIT_RAD, DEGREES_PLAUSIBLE_RAD = ANGLE_LIMIT_RAD, PLAUSIBLE_DEVIATION_
 K_PLAUSIBLE, I_PLAUSIBLE = (5.0, 2000.0), (1e-3, 1.0)
 
 
+def angle_channels(trials) -> list[str]:
+    """The angle channels the trials have: ``theta`` and, when any has it, ``theta_ref``
+    (a unit declared for theta alone leaves theta_ref read in radians)."""
+    return ["theta"] + (["theta_ref"] if any(getattr(t, "theta_ref", None) is not None
+                                             for t in trials) else [])
+
+
+def angle_units_advice(trials):
+    """``({"theta": "deg", "theta_ref": "deg"}, headers)``: the metadata ``units`` value
+    naming every angle channel the trials have, and ``headers(j)`` the CSV headers of
+    joint j (`` theta[1] (deg)`` and `` theta_ref[1] (deg)``)."""
+    names = angle_channels(trials)
+    key = "{" + ", ".join(f'"{c}": "deg"' for c in names) + "}"
+    return key, lambda j: ("s " if len(names) > 1 else " ") + " and ".join(
+        f"{c}[{j + 1}] (deg)" for c in names)
+
+
+#: A recording's angle scale this many times the other recordings' (180/pi = 57.3,
+#: within a factor DEGREE_SCALE_TOLERANCE) reads as a recording stored in degrees.
+DEGREE_SCALE_TOLERANCE = 2.0
+
+
+def _angle_scale(t) -> float:
+    """A recording's angle scale [as stored]: the largest joint's theta std (its
+    theta_ref's when theta is missing)."""
+    x = t.theta if t.theta is not None else getattr(t, "theta_ref", None)
+    return float(np.max(np.std(np.asarray(x, dtype=float), axis=0))) if x is not None \
+        else float("nan")
+
+
+def degree_outliers(unit: Unit) -> list[tuple]:
+    """Recordings of a set whose angles look like degrees beside the others in radians:
+    an angle scale (:func:`_angle_scale`) 180/pi times the median of the others' (within
+    DEGREE_SCALE_TOLERANCE). Checked per recording before the set is pooled (a pooled
+    spectrum mixes both scales). ``[(trial, message)]``; the message names the trial
+    and the metadata declaring every angle channel it has."""
+    trials = unit.trials
+    if len(trials) < 2:
+        return []
+    scales = [_angle_scale(t) for t in trials]
+    c, out = 180 / np.pi, []
+    for i, t in enumerate(trials):
+        others = [s for k, s in enumerate(scales) if k != i and np.isfinite(s) and s > 0]
+        if not others or not np.isfinite(scales[i]) or scales[i] <= 0:
+            continue
+        ratio = scales[i] / float(np.median(others))
+        if not c / DEGREE_SCALE_TOLERANCE <= ratio <= c * DEGREE_SCALE_TOLERANCE:
+            continue
+        key, _ = angle_units_advice([t])
+        out.append((t, f"{t.name}: its angles look like degrees (theta std "
+                       f"{scales[i]:.3g} as stored, {ratio:.3g} times the "
+                       f"{float(np.median(others)):.3g} rad of the other recordings; "
+                       f"180/pi = 57.3), the other recordings of {unit.label!r} are in "
+                       f"radians; declare \"units\": {key} in {t.name}.json; refused alone, "
+                       f"the others are estimated"))
+    return out
+
+
 def convention_warnings(result, trials) -> list[str]:
     """Conventions found in the data, not guessed: the metadata key to declare.
 
@@ -1072,6 +1132,7 @@ def convention_warnings(result, trials) -> list[str]:
                        f"\"sensors\": {{\"torque_sign\": {want}}} in the metadata or "
                        f"the .mat's sidecar NAME.json (now {now}), or give --torque-sign "
                        f"{want if len(signs) == 1 else -1}; the reader then negates tau_h")
+    units_key, headers = angle_units_advice(trials)
     degrees = set()
     for t in trials:
         if t.theta is None:
@@ -1086,9 +1147,9 @@ def convention_warnings(result, trials) -> list[str]:
                            f"rad), beyond the {DEGREES_LIMIT_RAD:g} rad a joint's "
                            f"perturbation can move it; read as degrees it is "
                            f"{np.radians(dev[j]):.3g} rad. If theta is in degrees, "
-                           f"declare it (metadata \"units\": {{\"theta\": \"deg\"}} or the "
-                           f"CSV header theta[{j + 1}] (deg), log-format.md) or store "
-                           f"theta[{j + 1}] * pi/180; K, B, {symbol_of('M', n)} are then "
+                           f"declare it (metadata \"units\": {units_key} or the "
+                           f"CSV header{headers(j)}, log-format.md) or store "
+                           f"them * pi/180; K, B, {symbol_of('M', n)} are then "
                            f"180/pi = 57.3 times these (K{_e(j, j, n)} about {k:.4g} "
                            f"{UNITS['K']})")
     c = 180 / np.pi
@@ -1111,8 +1172,7 @@ def convention_warnings(result, trials) -> list[str]:
                    f"(K about {k * c:.4g} {UNITS['K']}, {symbol_of('M', n)} about "
                    f"{inertia * c:.3g} {UNITS['M']}), as when theta[{j + 1}] (std {sd:.3g}) "
                    f"is stored in degrees. If it is, declare it: metadata \"units\": "
-                   f"{{\"theta\": \"deg\"}} or the CSV header theta[{j + 1}] (deg) "
-                   f"(log-format.md)")
+                   f"{units_key} or the CSV header{headers(j)} (log-format.md)")
     for t in trials:
         if t.meta.get("angles") == "absolute" or t.theta is None:
             continue

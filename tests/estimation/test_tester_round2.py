@@ -28,7 +28,8 @@ def test_a_small_perturbation_in_degrees_is_named(tmp_path, capsys):
     assert k < 2, out  # the fit in "rad" of an angle in degrees: 80 / 57.3
     m = re.search(r"angles in degrees\? deg: theta\[1\] gives K = [\d.]+ N m/rad and I = "
                   r"[\d.e-]+ kg m\^2, both implausibly small.*57\.3.*K about ([\d.]+) N m/rad"
-                  r".*\"units\": \{\"theta\": \"deg\"\} or the CSV header theta\[1\] \(deg\)",
+                  r".*\"units\": \{\"theta\": \"deg\", \"theta_ref\": \"deg\"\} or the CSV "
+                  r"headers theta\[1\] \(deg\) and theta_ref\[1\] \(deg\)",
                   out)
     assert m, out
     assert abs(float(m.group(1)) - ANKLE["K"]) < 0.15 * ANKLE["K"]
