@@ -11,8 +11,8 @@ import json
 import numpy as np
 import pytest
 
-import labsim
 import trialformat as tf
+from labsim_switching import switching_trial
 from estimation.cli import main
 from estimation.synthetic import position_trial
 
@@ -23,15 +23,7 @@ SWITCH_S = 0.37 + 2.0 * np.arange(7)  # labsim switching: period 4 s, phase 0.37
 def switching(tmp_path_factory):
     """14 s at 1 kHz, PD servo, noise perturbation to 40 Hz, K 40 <-> 160 N m/rad;
     torque noise at 15 dB SNR (as tests/estimation/test_segmentfit.py)."""
-    spec = labsim.RecordingSpec(
-        duration_s=14.0, fs=1000.0, seed=11,
-        perturbation=labsim.Perturbation(kind="noise", amplitude_rad=0.02,
-                                         band_hz=[0.0, 40.0]),
-        servo=labsim.Servo(kind="pd", f_hz=80.0, damping=0.8),
-        limb=labsim.Limb(K=40.0, B=1.2, I=0.015,
-                         K_var=labsim.Variation(time="switching", ratio=4.0, period_s=4.0,
-                                                phase_s=0.37)))
-    trial = labsim.simulate(spec).trial
+    trial = switching_trial()
     rng = np.random.default_rng(5)
     trial.tau_h = trial.tau_h + np.std(trial.tau_h) * 10 ** (-15 / 20) * \
         rng.standard_normal(trial.tau_h.shape)

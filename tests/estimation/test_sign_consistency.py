@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import labsim
 import trialformat as tf
+from labsim_switching import switching_trial
 from estimation.cli import main
 from estimation.segmentfit import segment_track
 from estimation.timevarying import time_variation
@@ -45,15 +45,7 @@ def _one_sign(text):
 def reversed_trial(tmp_path_factory):
     """14 s labsim recording, K 40 <-> 160 N m/rad switching every 2 s, its torque
     stored with the opposite sign and the metadata not saying so (sign lost)."""
-    spec = labsim.RecordingSpec(
-        duration_s=14.0, fs=1000.0, seed=11,
-        perturbation=labsim.Perturbation(kind="noise", amplitude_rad=0.02,
-                                         band_hz=[0.0, 40.0]),
-        servo=labsim.Servo(kind="pd", f_hz=80.0, damping=0.8),
-        limb=labsim.Limb(K=40.0, B=1.2, I=0.015,
-                         K_var=labsim.Variation(time="switching", ratio=4.0, period_s=4.0,
-                                                phase_s=0.37)))
-    trial = labsim.simulate(spec).trial
+    trial = switching_trial()
     trial.tau_h = -trial.tau_h
     out = tmp_path_factory.mktemp("reversed")
     tf.write_trial(out / "rec", trial)
