@@ -768,6 +768,21 @@ class _Gap:
     def significant(self, cfg: FitConfig) -> bool:
         return self.excess > self.threshold(cfg)
 
+    def residual_against(self, nominal_gap: float) -> dict:
+        """This fit's held-out residual beside the nominal's, floor included (issue 21:
+        a gap clipped at the floor is no measurement of how much the model explains).
+
+        ``nominal_gap``: the nominal gap on the same mask and split (relative, clipped).
+        Returns ``{"floor", "residual", "nominal_residual", "residual_reduction",
+        "clipped"}``: relative energies (torque energy = 1); ``clipped`` when this
+        residual lies below the floor (its gap reads 0 whatever it is)."""
+        nominal = max(float(nominal_gap), 0.0) + self.floor
+        own = self.excess + self.floor
+        return {"floor": float(self.floor), "residual": float(own),
+                "nominal_residual": float(nominal),
+                "residual_reduction": float(1.0 - own / nominal) if nominal > 0 else None,
+                "clipped": bool(self.excess < 0)}
+
     def model_tolerance(self, cfg: FitConfig) -> float:
         """The model tolerance the threshold adds: the measured one (summed over the
         records, as the gap is) or ``cfg.model_tolerance`` when that is a number."""
@@ -1206,6 +1221,8 @@ class EffectFit:
                 "at_search_bound": self.at_search_bound,
                 "n_evaluations": self.n_evaluations,
                 **({"split": self.split} if getattr(self, "split", None) else {}),
+                **({"held_out_residual": self.held_out_residual}
+                   if getattr(self, "held_out_residual", None) else {}),
                 **({"form_profile": self.form_profile} if self.form_profile else {}),
                 **({"preferred_over": self.preferred_over}
                    if getattr(self, "preferred_over", None) else {})}
@@ -1374,6 +1391,7 @@ def fit_effect(preps, name: str, nominal: dict, cfg: FitConfig = FitConfig(), *,
                     reduction, bound, n_eval, limb_ci=limb_ci)
     fit._problem = (prob, x, lin)
     fit.nominal_held_out_gap = nom_held
+    fit.held_out_residual = g_held.residual_against(nom_held)
     if ci is not None:
         _profile_form(fit, cfg)
     return fit
@@ -1426,6 +1444,7 @@ def fit_from_record(preps, d: dict, nominal: dict, cfg: FitConfig = FitConfig())
     else:
         prob = _Problem(preps, name, d["fixed"], cfg, nominal["solution"].cal_energy)
     fit.nominal_held_out_gap = nominal["gaps"]["held"].value
+    fit.held_out_residual = d.get("held_out_residual")
     x = np.asarray(d["x"], dtype=float)
     if x.shape != (len(prob.nl),):
         raise ValueError(f"record of {name!r} has {x.size} coordinates, not {len(prob.nl)}")

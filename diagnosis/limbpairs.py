@@ -529,7 +529,9 @@ def finish(lf, preps, single, prob, x, nominal, cfg) -> PairFit:
             "second_adds_points": None if pair_red is None else pair_red - single_red,
             "below_detectability": bool(cat.below_detectability(second, out[second])),
             "split": "default" if prob.split is None else
-            _split_of(preps, prob.names)[1]["rule"]}
+            _split_of(preps, prob.names)[1]["rule"],
+            # the residual floor included, on the same split (a clipped gap reads 0)
+            "held_out_residual": g_held.residual_against(n_held)}
     test["adds"] = bool(not flags and drop > threshold and g_cal.excess < r_cal.excess
                         and not test["below_detectability"])
     return PairFit(prob.names, out, lf._limb_from(sol.coef, n),

@@ -411,6 +411,7 @@ def fit_effect(lf, preps, name, nominal, cfg, *, intervals=True):
                  "nominal_held_out_gap": n_held.value, "calibration_gap": g_cal.value,
                  "held_out_gap": g_held.value}
     fit._problem = (prob0, x, {})
+    fit.held_out_residual = g_held.residual_against(n_held.value)  # on its own split
     if intervals and cfg.n_jackknife >= 2 and prob0.nl:
         lf.add_intervals(fit, cfg)
     return fit

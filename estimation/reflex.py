@@ -67,6 +67,30 @@ NAMES = {"K": "intrinsic stiffness", "B": "intrinsic damping", "I": "intrinsic i
          "cutoff_hz": "reflex low-pass natural frequency", "damping": "reflex low-pass damping"}
 RECTIFY = ("auto", "positive", "negative", "none")
 
+#: stretch-reflex latencies reported for the ankle and the elbow [ms] (ankle plantar
+#: flexors about 40 ms: Kearney, Stein & Parameswaran 1997; 40-50 ms in the parameter-
+#: varying ankle studies, Sobhani Tehrani & Kearney 2022); a fitted pure delay outside is
+#: flagged: the model's activation low-pass trades lag with it
+TYPICAL_DELAY_MS = (30.0, 60.0)
+
+
+def latency_warning(delay_ms: float, cutoff_hz: float | None = None,
+                    damping: float | None = None) -> str | None:
+    """A warning when a fitted reflex delay [ms] lies outside :data:`TYPICAL_DELAY_MS`,
+    saying what it then is (the pathway's pure delay in this model form, its activation's
+    group delay beside it, 2 zeta / omega_n at low frequency), else None."""
+    lo, hi = TYPICAL_DELAY_MS
+    if not np.isfinite(delay_ms) or lo <= delay_ms <= hi:
+        return None
+    lag = ("" if not cutoff_hz or damping is None else
+           f"; its activation low-pass ({cutoff_hz:.3g} Hz, damping {damping:.2g}) adds "
+           f"{1e3 * 2 * damping / (2 * np.pi * cutoff_hz):.0f} ms of group delay at low "
+           f"frequency")
+    return (f"reflex delay {delay_ms:.1f} ms lies outside the {lo:g}-{hi:g} ms of "
+            f"stretch-reflex latencies reported for the ankle and elbow{lag}: read it as "
+            f"this model form's pure delay, not as the reflex latency; another command's "
+            f"or model form's delay on the same data may differ by as much")
+
 
 class ReflexNotApplicable(EstimationError):
     """The parallel-cascade fit does not apply to this input: ``kind`` ``"short"`` (a
@@ -623,6 +647,10 @@ def reflex_warnings(r: ReflexResult, options: ReflexOptions) -> list:
             out.append(f"{p} = {r.values[p]:.4g} is at the edge of its search range "
                        f"{lo:g}-{hi:g}: widen the range (e.g. {opt} {wider[0]:g} "
                        f"{wider[1]:g}; ReflexOptions.{p} in the API)")
+    late = latency_warning(r.values["delay_ms"], r.values.get("cutoff_hz"),
+                           r.values.get("damping"))
+    if late and gain >= 1.0:
+        out.append(late)
     if not r.resists_stretch and gain >= 1.0:
         out.append("the reflex torque aids the stretch instead of resisting it (check the "
                    "torque sign: sensors.torque_sign)")

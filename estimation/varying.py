@@ -595,6 +595,12 @@ def _warnings(res: VaryingResult, name) -> list:
         if np.all(res.hi[p] < 0):
             out.append(f"{p}({name}) negative over the whole range: the torque sign may be "
                        f"reversed (a passive joint has {p} > 0)")
+    rf = res.reflex
+    if rf is not None:
+        from .reflex import latency_warning
+        late = latency_warning(rf["delay_ms"], rf.get("cutoff_hz"), rf.get("damping"))
+        if late:
+            out.append(late)
     if h["varying"] < h["invariant"]:
         out.append(f"held-out VAF of the varying model {h['varying']:.2f} % below the "
                    f"time-invariant one's {h['invariant']:.2f} %")

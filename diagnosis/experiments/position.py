@@ -204,6 +204,8 @@ class PositionServo(Experiment):
                                  ci=f.limb_ci)
             # a varying effect's own held-out split, and the nesting rule (report)
             fit.split = getattr(f, "split", None)
+            # the held-out residual with the floor in it (a gap clipped at 0 says little)
+            fit.held_out_residual = getattr(f, "held_out_residual", None)
             fit.preferred_over = getattr(f, "preferred_over", None)
             # limbfit's flags as notes (a negative linear gain: unphysical), formatted
             # with the parameters in the units they are shown in (fitting.format_flags)
@@ -347,6 +349,7 @@ def _pair_fit(p, fs):
     fit.value_flags = [(k, g, "< 0 (unphysical)") for k in p.effects
                        for g in lf.LINEAR.get(k, ()) if p.params[k][g] < 0]
     fit.second_test = dict(p.test)
+    fit.held_out_residual = p.test.get("held_out_residual")
     fit.split = p.split
     return fit
 

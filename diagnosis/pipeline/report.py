@@ -48,6 +48,12 @@ def build(r) -> DiagnosisReport:
     if r.units and profile:
         profile = _profile_in_units(profile, r.units["tau_h"] / r.units["theta"])
     named = None if chosen is None else named_model(model, fitted, intervals, profile)
+    scheduling = [u for u in r.scheduling if u["trial"] in {t.name for t in r.trials}]
+    if named is not None and r.experiment.kind == "position":
+        from .state_profile import profile as state_profile
+        pv = state_profile(r.trials, named, scheduling)  # K(rho) beside estimate's
+        if pv is not None:
+            named["parameter_varying"] = pv
     return DiagnosisReport(
         named_model=named,
         verdict=r.verdict, named=r.named, summary=r.summary, amplitude=r.amplitude,
@@ -70,7 +76,7 @@ def build(r) -> DiagnosisReport:
                "held_out": [{"trial": u.trial.name, "start": u.start, "stop": u.stop}
                             for u in r.held]},
         config=r.config.to_dict(), grouping=r.grouping,
-        scheduling=[u for u in r.scheduling if u["trial"] in {t.name for t in r.trials}],
+        scheduling=scheduling,
         n_simulations=n_parent_sims + r.n_worker_sims,
         elapsed_s=time.perf_counter() - r.t0, trials=[t.name for t in r.trials],
         experiment={**r.experiment.describe(), "simulated_by": simulated_by(r),
@@ -119,6 +125,10 @@ def gap_block(r, chosen, reduction) -> dict:
            "named_held_out": None if chosen is None else chosen.held_out_gap,
            "named_held_out_reduction": None if chosen is None else
            reduction(r.g0_held, chosen.held_out_gap),
+           # the named fit's held-out residual with the floor in it, on its split: the
+           # gap is clipped at the floor, so "100 %" alone may be a bound (issue 21)
+           "named_held_out_residual": None if chosen is None else
+           getattr(chosen, "held_out_residual", None),
            # the named model on all data: in the feature measure only (limbfit gives the
            # calibration and held-out parts)
            "named_all": (None if r.after is None else r.after.value) if not fm else None}
@@ -179,6 +189,9 @@ def named_model(model: dict, fitted: dict, intervals: dict, form_profile=None) -
             k: v if isinstance(v, (bool, str)) or k in choices else
             [float(v)] + ([float(c) for c in cis[k]] if k in cis else [None, None])
             for k, v in params.items()}
+    notes = _reflex_notes(out["effects"].get("stretch_reflex"))
+    if notes:
+        out["notes"] = notes
     if form_profile:
         out["form_profile"] = {
             e: {k: rec.get(k) for k in ("profiled", "best_fitting", "point_estimate_changed",
@@ -186,6 +199,31 @@ def named_model(model: dict, fitted: dict, intervals: dict, form_profile=None) -
                                        "delay_resolution_s")}
             for e, rec in form_profile.items() if rec}
     return out
+
+
+def reflex_latency(p: dict | None) -> dict | None:
+    """``{"delay_ms", "frequency_hz", "damping", "effective_ms"}`` of a named stretch
+    reflex (``named_model`` effect entry, values as ``[value, lo, hi]`` or plain): the pure
+    delay and the delay plus its activation's low-frequency group delay 2 zeta / omega_n
+    (the tied damping, diagnosis.limb, unless the form profile chose another)."""
+    if not p:
+        return None
+    from ..limb import DEFAULTS
+    v = {k: (x[0] if isinstance(x, list) else x) for k, x in p.items()}
+    zeta = float(v.get("damping", DEFAULTS["stretch_reflex"]["damping"]))
+    d, f = 1e3 * float(v["delay_s"]), float(v["frequency_hz"])
+    return {"delay_ms": d, "frequency_hz": f, "damping": zeta,
+            "effective_ms": d + 1e3 * 2 * zeta / (2 * np.pi * f)}
+
+
+def _reflex_notes(p: dict | None) -> list:
+    """The named reflex's delay against the reported latencies (estimation.reflex)."""
+    lat = reflex_latency(p)
+    if lat is None:
+        return []
+    from estimation.reflex import latency_warning
+    w = latency_warning(lat["delay_ms"], lat["frequency_hz"], lat["damping"])
+    return [w] if w else []
 
 
 def _profile_in_units(profile: dict, rho: float) -> dict:

@@ -54,6 +54,9 @@ def run(r) -> None:
         shown = _effects_in_units(best.params, r.units["tau_h"] / r.units["theta"])
     summary = verdict_text(verdict, named, chosen, r.g0_held, residual, amplitude,
                            best=best, best_params=shown)
+    if chosen is not None and after is not None:
+        summary += features_disagree(getattr(r, "fit_measure", None), r.nominal_all.value,
+                                     after.value)
     when = getattr(r, "when", None)  # pipeline.when (absent in callers without that stage)
     summary += when.get("sentence", "") if when else ""
     if r.numerics:
@@ -133,12 +136,38 @@ def verdict_text(verdict, named, chosen, g0_held, residual, amplitude, best=None
     share = reduction(g0_held, chosen.held_out_gap)
     # 99.9 %, not 100 %, when it is not all (the tie sentence then gives the same figure)
     text = (f"{' + '.join(named)} closes {100 * share:.{_digits(share)}f} % of the held-out "
-            f"gap") + _pair_parts(
-        chosen, best, g0_held)
+            f"gap") + _clipped(chosen) + _pair_parts(chosen, best, g0_held)
     if verdict == VERDICT_PARTLY:
         return ("partly explained: " + text + "; the rest lies in "
                 + "; ".join(rest_where(residual)) + "." + amp)
     return f"{verdict}: {text}." + amp
+
+
+def _clipped(chosen) -> str:
+    """`` (to the noise floor: the residual itself falls 61 %)`` when the named fit's
+    held-out residual lies below the floor, where its gap is clipped at 0 and "100 %" is
+    a bound (limbfit._Gap.residual_against); "" otherwise."""
+    res = getattr(chosen, "held_out_residual", None)
+    if not res or not res.get("clipped") or res.get("residual_reduction") is None:
+        return ""
+    return (f" to the noise floor, a bound: its held-out residual, floor included, "
+            f"falls {100 * res['residual_reduction']:.0f} %, "
+            f"{res['nominal_residual']:.3g} -> {res['residual']:.3g} of the torque energy, "
+            f"under a floor of {res['floor']:.3g}")
+
+
+def features_disagree(fit_measure, nominal_features, named_features) -> str:
+    """A caution when the named model, judged by the time-domain fit measure, makes the
+    where stage's FRF feature gap larger (the two measures then disagree and the
+    verdict rests on one of them); "" otherwise or without a separate fit measure."""
+    if not fit_measure or named_features is None or nominal_features is None:
+        return ""
+    if not (math.isfinite(named_features) and named_features > 1.05 * nominal_features):
+        return ""
+    return (f" Caution: the FRF feature gap rises with the named model "
+            f"({nominal_features:.3g} -> {named_features:.3g}): it reproduces the torque "
+            f"in time better than the nominal limb but the measured FRF worse; the verdict "
+            f"rests on the time-domain gap alone.")
 
 
 def _pair_parts(chosen, single, g0_held) -> str:

@@ -1,0 +1,97 @@
+"""K over the scheduling variable for a named state-varying effect (issue 20): the named
+model's stiffness K0 (1 + s (rho - rho_mid) + c (rho - rho_mid)^2) at the points
+``armimp estimate`` reports its parameter-varying K(rho) at, beside that estimate with its
+95 % intervals, so the two commands' answers on one recording can be read side by side.
+
+The estimate is estimation.varying's Chebyshev expansion (with the reflex pathway when
+the named model has a stretch reflex), the diagnosis's the catalogue's quadratic form
+fitted inside limbfit: two forms, two fits, one limb.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: the state-varying effects whose stiffness this profiles (diagnosis.varying_effects)
+STATE_EFFECTS = ("stiffness_angle",)
+#: points over the calibration's 1-99 % range when the estimate gives none
+N_POINTS = 7
+
+
+def _named_k(k0: float, p: dict, rho) -> np.ndarray:
+    d = np.asarray(rho, float) - float(p["rho_mid"])
+    return k0 * (1.0 + float(p["slope_rel"]) * d + float(p["curvature_rel"]) * d * d)
+
+
+def _estimate(trials, reflex: bool):
+    """The first parameter-varying estimate of ``trials`` (estimation.pvlab), or None."""
+    from estimation.pvlab import varying_of_trials
+    from types import SimpleNamespace
+    fits, _ = varying_of_trials(trials, SimpleNamespace(reflex=reflex))
+    return fits[0] if fits else None
+
+
+def profile(trials, named_model: dict, scheduling: list) -> dict | None:
+    """``{"scheduling", "units", "form", "points": [{"rho", "K": [v, lo, hi],
+    "K_estimate": [v, lo, hi] | None}], "estimate": {...} | None, "agreement",
+    "reflex": {"named", "estimate"} | None}`` (each reflex's delay_ms, frequency_hz,
+    damping and effective_ms: the delay plus its activation's low-frequency group delay) for a
+    named state-varying effect, else None.
+
+    ``trials``: the diagnosed (convention-corrected) trials; ``named_model``: the
+    report's ``named_model`` (K in N m/rad, effect parameters as ``[value, lo, hi]``);
+    ``scheduling``: the report's ``scheduling`` entries (name, units per trial).
+    ``agreement``: the share of points where the named K lies inside the estimate's
+    interval. K's own interval is None: the named fit's K0 and shape carry no joint
+    interval yet (a pair's fit gives none)."""
+    effects = (named_model or {}).get("effects") or {}
+    name = next((e for e in STATE_EFFECTS if e in effects), None)
+    if name is None or len(trials) != 1 or trials[0].n_dof != 1:
+        return None
+    p = {k: (v[0] if isinstance(v, list) else v) for k, v in effects[name].items()}
+    k0 = float(named_model["K"][0])  # one joint: one [value, low, high]
+    try:
+        est = _estimate(trials, "stretch_reflex" in effects)
+    except Exception as exc:  # the estimate is a comparison: its failure is said, not fatal
+        est, why = None, f"{type(exc).__name__}: {exc}"
+    else:
+        why = None if est is not None else "the estimate gave no parameter-varying fit"
+    if est is not None:
+        rho = np.asarray(est.rho, float)
+    else:
+        mid, half = float(p["rho_mid"]), float(p["rho_half_range"])
+        rho = np.linspace(mid - half, mid + half, N_POINTS)
+    k = _named_k(k0, p, rho)
+    pts = []
+    for i, r in enumerate(rho):
+        pt = {"rho": float(r), "K": [float(k[i]), None, None]}
+        pt["K_estimate"] = (None if est is None else
+                            [float(est.values["K"][i]), float(est.lo["K"][i]),
+                             float(est.hi["K"][i])])
+        pts.append(pt)
+    inside = [pt["K_estimate"][1] <= pt["K"][0] <= pt["K_estimate"][2]
+              for pt in pts if pt["K_estimate"] is not None]
+    reflex = None
+    if "stretch_reflex" in effects:
+        from .report import reflex_latency
+        rf = None if est is None else est.reflex
+        reflex = {"named": reflex_latency(effects["stretch_reflex"]),
+                  "estimate": None if not rf else {
+                      "delay_ms": rf["delay_ms"], "frequency_hz": rf["cutoff_hz"],
+                      "damping": rf["damping"],
+                      "effective_ms": rf["delay_ms"] + 1e3 * 2 * rf["damping"]
+                      / (2 * np.pi * rf["cutoff_hz"])}}
+    sch = next((s for s in scheduling or [] if s.get("trial") == trials[0].name), {})
+    return {"scheduling": sch.get("name", "rho"), "units": sch.get("units", ""),
+            "effect": name,
+            "form": f"K0 (1 + s (rho - rho_mid) + c (rho - rho_mid)^2), K0 = {k0:.4g} N m/rad",
+            "points": pts,
+            "estimate": None if est is None else {
+                "method": f"armimp estimate's parameter-varying fit (Chebyshev order "
+                          f"{est.order}{', with the reflex pathway' if est.reflex else ''}; "
+                          f"95 % jackknife intervals)",
+                "heldout_vaf_pct": est.heldout_vaf_pct},
+            "estimate_missing": why,
+            # the two reflex pathways' delays: pure, and with the activation's lag
+            "reflex": reflex,
+            "agreement": None if not inside else float(np.mean(inside))}
