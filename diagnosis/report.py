@@ -76,7 +76,8 @@ class DiagnosisReport:
 
 
 FIGURES = {"where": "gap_where.png", "ranking": "gap_ranking.png",
-           "frf": "frf_compare.png", "noise": "noise_spectra.png"}
+           "frf": "frf_compare.png", "noise": "noise_spectra.png",
+           "varying": "k_of_rho.png"}
 UNITS = {"theta": "rad", "tau_h": "N m", "tau_m": "N m"}
 
 
@@ -90,6 +91,9 @@ def write_report(report, out_dir) -> Path:
     if report.gap_in_time:
         from .pipeline.when import plot
         plot(report.gap_in_time, out / "gap_time.png")
+    pv = (report.named_model or {}).get("parameter_varying")
+    if pv:
+        _plot_varying(pv, out / FIGURES["varying"])
     _atomic_text(out / "report.json", json.dumps(_clean(report.to_dict()), indent=2))
     _atomic_text(out / "report.md", markdown(report))
     return out / "report.md"
@@ -384,6 +388,7 @@ def varying_lines(pv: dict) -> list:
         lines.append(f"| {_fmt(pt['rho'], 4)} | {_fmt(pt['K'][0], 4)} | "
                      + ("-" if e is None else f"{_fmt(e[0], 4)} [{_fmt(e[1], 4)}, "
                         f"{_fmt(e[2], 4)}]") + " |")
+    lines += ["", f"![K over {pv['scheduling']}]({FIGURES['varying']})"]
     if pv.get("agreement") is not None:
         lines += ["", f"The named model's K lies inside the estimate's interval at "
                       f"{100 * pv['agreement']:.0f} % of the points (two forms fitted apart: "
@@ -457,6 +462,26 @@ def ranking_lines(report) -> list:
     m = measure_name(g)
     return [(g["nominal_held_out"], f"nominal, held out ({m})"),
             (g["significance_threshold"], f"significance of the nominal gap ({m})")]
+
+
+def _plot_varying(pv: dict, path: Path) -> None:
+    """K over the scheduling variable: the named model's curve, the estimate's with its
+    95 % band (diagnosis.pipeline.state_profile)."""
+    rho = np.array([p["rho"] for p in pv["points"]])
+    fig, ax = plt.subplots(figsize=(6, 3.8))
+    est = [p.get("K_estimate") for p in pv["points"]]
+    if all(e is not None for e in est):
+        e = np.array(est, float)
+        ax.fill_between(rho, e[:, 1], e[:, 2], alpha=0.25, label="estimate, 95 %")
+        ax.plot(rho, e[:, 0], "o-", ms=3, label="armimp estimate (parameter-varying)")
+    ax.plot(rho, [p["K"][0] for p in pv["points"]], "k--", label=f"named model ({pv['effect']})")
+    u = f" [{pv['units']}]" if pv.get("units") else ""
+    ax.set_xlabel(f"{pv['scheduling']}{u}")
+    ax.set_ylabel("K [N m/rad]")
+    ax.set_title("Stiffness over the scheduling variable", fontsize=10)
+    ax.legend(fontsize=8)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
 
 
 def _plot_ranking(report, path: Path) -> None:

@@ -93,3 +93,4 @@ def test_the_moving_ankle_gives_k_over_its_angle_and_an_honest_reduction(tmp_pat
     assert rf["named"]["effective_ms"] > rf["named"]["delay_ms"] > 0
     assert rf["estimate"]["effective_ms"] > rf["estimate"]["delay_ms"] > 0
     assert "K over sv [rad] of the named model" in md and "Reflex delay:" in md
+    assert (out / "k_of_rho.png").stat().st_size > 10_000 and "k_of_rho.png" in md
