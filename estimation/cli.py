@@ -15,6 +15,8 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 import trialformat as tf
 from trialformat.cliargs import MAX_FFT, number
 
@@ -525,7 +527,39 @@ def describe(r, torque_sign=None) -> str:
     lines += describe_varying(getattr(r, "varying", None) or [])
     from .segmentlab import describe_segments
     lines += describe_segments(getattr(r, "time_segments", None) or [])
+    k = k_by_model(r)
+    if k:
+        lines.append(k)
     return "\n".join(lines)
+
+
+def k_by_model(r) -> str | None:
+    """One line naming every stiffness a one-joint result printed, by the model that gave
+    it (the FRF fit, the parallel cascade's pathways, the parameter-varying fit, the time
+    segments), when more than one model gave one; None otherwise. They answer different
+    questions (issue 21: five unlabelled K values on the moving ankle)."""
+    if r.n_dof != 1:
+        return None
+    u = "N m/rad"
+    parts = [f"FRF fit {r.band_hz[0]:.3g}-{r.band_hz[1]:.3g} Hz {r.fit.K[0, 0]:.4g}"
+             f"±{r.fit.K_ci[0, 0]:.2g}"]
+    for x in r.reflex or []:
+        parts.append(f"time-domain K-B-I alone {x.intrinsic_only['K']:.4g}")
+        parts.append(f"parallel cascade's intrinsic pathway {x.values['K']:.4g}"
+                     f"±{x.ci['K']:.2g}")
+    for f in getattr(r, "varying", None) or []:
+        v, lo, hi = f.invariant["K"]
+        parts.append(f"parameter-varying fit's time-invariant order 0 {v:.4g} "
+                     f"[{lo:.4g}, {hi:.4g}], over {f.scheduling} "
+                     f"{np.min(f.values['K']):.4g}..{np.max(f.values['K']):.4g}")
+    for sgm in getattr(r, "time_segments", None) or []:
+        ks = np.asarray(sgm.values["K"], float)
+        if ks.size > 1:
+            parts.append(f"time segments {ks.min():.4g}..{ks.max():.4g}")
+    if len(parts) < 2:
+        return None
+    return (f"  K by model ({u}; each answers another question, and a limb that changes "
+            f"has no single K): " + "; ".join(parts))
 
 
 def reflex_note(results) -> str | None:
