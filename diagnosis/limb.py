@@ -329,7 +329,8 @@ def channel_apply(tau: np.ndarray, fs: float, effects: dict) -> np.ndarray:
     return out
 
 
-def limb_torque(theta, fs: float, limb: LimbModel, effects: dict | None = None) -> np.ndarray:
+def limb_torque(theta, fs: float, limb: LimbModel, effects: dict | None = None,
+                stiffness_factor=None) -> np.ndarray:
     """The torque the sensor measures when the angle ``theta`` is imposed.
 
     Parameters
@@ -341,6 +342,9 @@ def limb_torque(theta, fs: float, limb: LimbModel, effects: dict | None = None) 
     effects : dict {name: params}
         Effects of the module docstring (limb and torque channel); {} or None: model (1).
         ``servo_bandwidth`` is ignored here (it acts on the angle: :func:`servo_response`).
+    stiffness_factor : array (N,) or (N, n), optional
+        A per-sample factor on the stiffness torque from outside the limb model (a
+        stiffness varying in time or with the state, diagnosis.varying_effects.factor).
 
     Returns
     -------
@@ -363,6 +367,9 @@ def limb_torque(theta, fs: float, limb: LimbModel, effects: dict | None = None) 
     scale = stiffness_scale(theta, fs, effects)
     if scale is not None:
         tau_k = tau_k * scale
+    if stiffness_factor is not None:
+        f = np.asarray(stiffness_factor, float)
+        tau_k = tau_k * (f[:, None] if f.ndim == 1 else f)
     tau = tau_k + omega @ limb.B.T + alpha @ limb.I.T
     if "wobbling_mass" in effects:
         p = effect_params("wobbling_mass", effects["wobbling_mass"])
@@ -389,10 +396,11 @@ def servo_angle(theta_ref, fs: float, effects: dict | None = None) -> np.ndarray
 
 
 def servo_response(theta_ref, fs: float, limb: LimbModel,
-                   effects: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   effects: dict | None = None,
+                   stiffness_factor=None) -> tuple[np.ndarray, np.ndarray]:
     """A position servo tracks ``theta_ref`` (N, n) [rad]; returns (theta, tau), both
     (N, n): the imposed angle [rad] (:func:`servo_angle`) and the measured torque [N m]
     (:func:`limb_torque` of that angle). Errors as :func:`limb_torque`."""
     theta_ref = _as_signal(theta_ref, "theta_ref", limb.n_dof)
     theta = servo_angle(theta_ref, fs, effects)
-    return theta, limb_torque(theta, fs, limb, effects)
+    return theta, limb_torque(theta, fs, limb, effects, stiffness_factor)

@@ -284,6 +284,38 @@ def summary(preps, name, params, coef) -> dict:
     return out
 
 
+#: the varying effects a re-simulation can run from their reported parameters (the
+#: others need what the fit read from the data and does not report: the switching's
+#: change points, the modulation's phase)
+RESIMULATED = ("stiffness_angle", "stiffness_torque", "stiffness_saturating")
+
+
+def factor(trial, name, params, n_samples):
+    """(n_samples,) the factor on K of varying effect ``name`` with reported ``params``
+    over a trialformat.Trial, K0 (1 + s d + c d^2) or K0 (1 + r (1 - exp(-t / T))) over
+    K0; None when it cannot be rebuilt (not in :data:`RESIMULATED`, no schedule)."""
+    n = int(n_samples)
+    if name == "stiffness_saturating":
+        t = np.arange(n) / trial.fs
+        return 1.0 + float(params["change_rel"]) * (1.0 - np.exp(
+            -t / float(params["time_constant_s"])))
+    if name not in STATE_EFFECTS:
+        return None
+    from trialformat import scheduling as sch
+    if name == "stiffness_angle":
+        try:
+            s = sch.scheduling_of(trial)
+        except Exception:  # SchedulingError: no usable schedule, no rebuilt factor
+            return None
+        if s is None or getattr(s, "name", "") == "time":
+            return None
+        rho = np.asarray(s.values, float).reshape(-1)[:n]
+    else:
+        rho = sch.slow_part(np.asarray(trial.tau_h[:, 0], float), trial.fs)[:n]
+    d = rho - float(params["rho_mid"])
+    return 1.0 + float(params["slope_rel"]) * d + float(params["curvature_rel"]) * d * d
+
+
 # ----------------------------------------------------------------------------- splits
 def usable(pr):
     """The samples of prepared record ``pr`` that any fit or gap may use (its default

@@ -80,16 +80,23 @@ class PositionServo(Experiment):
         def simulate(trial, effects, n_samples):
             n = int(n_samples)
             fs = trial.fs
-            # a varying stiffness needs the schedule the fit used (diagnosis.varying_effects),
-            # which the re-simulation does not get: the named limb runs time-invariant
-            from ..varying_effects import EFFECTS as varying
-            effects = {k: v for k, v in (effects or {}).items() if k not in varying}
+            # a varying stiffness as reported (K0 and its relative change, rebuilt from
+            # the trial's schedule or time: varying_effects.factor); the switching's and
+            # the modulation's are not reported in full, their limb runs time-invariant
+            from .. import varying_effects as vary
+            factor = None
+            for k, v in (effects or {}).items():
+                f = vary.factor(trial, k, v, n) if k in vary.EFFECTS else None
+                if f is not None:
+                    factor = f if factor is None else factor * f
+            effects = {k: v for k, v in (effects or {}).items() if k not in vary.EFFECTS}
             try:
                 if trial.theta_ref is not None:
-                    theta, tau = lm.servo_response(trial.theta_ref[:n], fs, limb, effects or {})
+                    theta, tau = lm.servo_response(trial.theta_ref[:n], fs, limb, effects or {},
+                                                   factor)
                 else:
                     theta = np.array(trial.theta[:n], dtype=float)
-                    tau = lm.limb_torque(theta, fs, limb, effects or {})
+                    tau = lm.limb_torque(theta, fs, limb, effects or {}, factor)
             except (FloatingPointError, OverflowError, np.linalg.LinAlgError):
                 return None
             theta, tau = np.asarray(theta, float), np.asarray(tau, float)

@@ -89,8 +89,48 @@ def test_the_moving_ankle_gives_k_over_its_angle_and_an_honest_reduction(tmp_pat
     assert pv["points"][-1]["K"][0] > 2 * min(p["K"][0] for p in pv["points"])
     assert pv["points"][-1]["K_estimate"][0] > 2 * pv["points"][0]["K_estimate"][0]
     assert 0.0 <= pv["agreement"] <= 1.0
+    # the named model re-simulated as reported (K over sv) reproduces the FRF features
+    # better than the nominal limb (before: K0 alone, 22.7 -> 34)
+    feat = rep["gap"]["features"]
+    assert feat["named_all"] < feat["nominal_all"]
     rf = pv["reflex"]
     assert rf["named"]["effective_ms"] > rf["named"]["delay_ms"] > 0
     assert rf["estimate"]["effective_ms"] > rf["estimate"]["delay_ms"] > 0
     assert "K over sv [rad] of the named model" in md and "Reflex delay:" in md
     assert (out / "k_of_rho.png").stat().st_size > 10_000 and "k_of_rho.png" in md
+
+
+def test_the_named_model_is_re_simulated_with_its_varying_stiffness():
+    """The where stage's re-simulation runs a varying stiffness as reported (before, it
+    dropped every varying effect: the named limb ran time-invariant at K0)."""
+    from diagnosis import limb as lm
+    from diagnosis.experiments.position import PositionServo, model_of
+    from estimation.synthetic import position_trial
+    trial = position_trial(K=50.0, B=1.0, I=0.01, duration_s=6.0, name="rec")
+    limb = lm.LimbModel(K=[[40.0]], B=[[1.0]], I=[[0.01]])
+    sim = PositionServo([trial]).simulator(model_of(limb, trial.fs, "test"))
+    n = trial.n_samples
+    sat = {"change_rel": -0.5, "time_constant_s": 2.0}
+    got = sim(trial, {"stiffness_saturating": sat}, n).tau_h[:, 0]
+    theta = np.asarray(trial.theta_ref[:n] if trial.theta_ref is not None else trial.theta,
+                       float)
+    flat = lm.limb_torque(theta, trial.fs, limb)[:, 0]
+    t = np.arange(n) / trial.fs
+    k_t = 40.0 * (1 - 0.5 * (1 - np.exp(-t / 2.0)))
+    assert np.allclose(got - flat, (k_t - 40.0) * theta[:, 0], atol=1e-9)
+    # a switching stiffness is not reported in full (its change points): run flat
+    sw = sim(trial, {"stiffness_switching": {"level_ratio": 2.0, "n_changes": 4}}, n)
+    assert np.allclose(sw.tau_h[:, 0], flat)
+
+
+@pytest.mark.skipif(PILOT is None, reason="no ../shared/data/reklab-pilot/")
+def test_the_angle_factor_reads_the_recordings_schedule():
+    import trialformat as tf
+    from diagnosis.varying_effects import factor
+    with pytest.warns(UserWarning):
+        (trial,) = tf.read_trials_mat(str(PILOT))
+    p = {"slope_rel": 4.0, "curvature_rel": 20.0, "rho_mid": -0.1, "rho_half_range": 0.3}
+    f = factor(trial, "stiffness_angle", p, trial.n_samples)
+    d = np.asarray(trial.extra["sv"], float).reshape(-1) + 0.1
+    assert np.allclose(f, 1 + 4.0 * d + 20.0 * d * d)
+    assert f.max() > 2 * f.min() > 0
