@@ -189,6 +189,7 @@ class PairProblem:
         self.nl = [(k, p) for k in self.names for p in searched(lf, k)]
         self.split, self.unit, self.n_eval = split, unit or 1.0, 0
         self.active = None  # the search's subset of records (limbfit.on_subset)
+        self.masks = None   # calibration rows per record of a jackknife replicate
 
     def context(self):
         return vary.swapped(self.preps, self.split) if self.split is not None else nullcontext()
@@ -217,12 +218,14 @@ class PairProblem:
                 built = [pair_columns(pr, params) for pr in preps]
             except ValueError:
                 return math.inf, None, None, None
-            sol = lf._solve(preps, [c for c, _ in built])
+            masks = self.masks if self.active is None else None
+            sol = lf._solve(preps, [c for c, _ in built], masks)
             ang = [lf._angle_residual(pr, params.get("servo_bandwidth")) for pr in preps]
             obj = sol.cal_energy
-            for pr, a in zip(preps, ang):
+            for i, (pr, a) in enumerate(zip(preps, ang)):
                 if a is not None:
-                    obj += float(np.sum(a[pr.cal] ** 2)) / pr.theta_norm ** 2
+                    m = pr.cal if masks is None else masks[i]
+                    obj += float(np.sum(a[m] ** 2)) / pr.theta_norm ** 2
         return obj, sol, ang, built[0][1]
 
     def objective(self, x):
@@ -304,6 +307,12 @@ class PairFit:
     n_evaluations: int = 0
     test: dict = field(default_factory=dict)
     split: dict | None = None
+    #: {effect: {param: [low, high]}} 95 % one-step jackknife intervals (:func:`add_intervals`)
+    intervals: dict | None = None
+    #: 95 % half-widths of the limb's K, B, I with the pair ({"K_h", "B_h", "M_h"})
+    limb_ci: dict | None = None
+    #: the jackknife replicates: [{"K": K0 of joint 1, effect: params}] (add_intervals)
+    replicates: list | None = None
 
     @property
     def adds(self) -> bool:
@@ -317,7 +326,9 @@ class PairFit:
                 "held_out_reduction": self.held_out_reduction,
                 "at_search_bound": self.at_search_bound, "n_evaluations": self.n_evaluations,
                 "second_effect_test": self.test,
-                **({"split": self.split} if self.split else {})}
+                **({"split": self.split} if self.split else {}),
+                **({"intervals": self.intervals, "limb_ci": self.limb_ci,
+                    "replicates": self.replicates} if self.intervals else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PairFit":
@@ -326,7 +337,8 @@ class PairFit:
                    float(d["held_out_gap"]),
                    None if d["held_out_reduction"] is None else float(d["held_out_reduction"]),
                    list(d["at_search_bound"]), int(d["n_evaluations"]),
-                   dict(d["second_effect_test"]), d.get("split"))
+                   dict(d["second_effect_test"]), d.get("split"), d.get("intervals"),
+                   d.get("limb_ci"), d.get("replicates"))
 
 
 def _split_of(preps, names):
@@ -534,11 +546,65 @@ def finish(lf, preps, single, prob, x, nominal, cfg) -> PairFit:
             "held_out_residual": g_held.residual_against(n_held)}
     test["adds"] = bool(not flags and drop > threshold and g_cal.excess < r_cal.excess
                         and not test["below_detectability"])
-    return PairFit(prob.names, out, lf._limb_from(sol.coef, n),
-                   obj, g_cal.value * scale_cal, g_held.value * scale_held,
-                   None if n_held <= 0 else 1.0 - g_held.value / n_held, flags,
-                   prob.n_eval, test,
-                   None if prob.split is None else _split_of(preps, prob.names)[1])
+    fit = PairFit(prob.names, out, lf._limb_from(sol.coef, n),
+                  obj, g_cal.value * scale_cal, g_held.value * scale_held,
+                  None if n_held <= 0 else 1.0 - g_held.value / n_held, flags,
+                  prob.n_eval, test,
+                  None if prob.split is None else _split_of(preps, prob.names)[1])
+    fit._problem = (prob, np.asarray(x, float))  # for add_intervals (not serialised)
+    return fit
+
+
+#: parameters that describe the data, not the fit (a schedule's centre and half range,
+#: the number of switches read from the data): no interval
+DESCRIPTORS = ("rho_mid", "rho_half_range", "n_changes")
+
+
+def add_intervals(lf, preps, fit: PairFit, cfg) -> PairFit:
+    """95 % delete-one-block jackknife intervals of a pair's parameters and limb, in place.
+
+    Each of ``cfg.n_jackknife`` replicates drops one contiguous block of every record's
+    calibration rows (on the pair's own split) and takes one Newton step from the full
+    fit's nonlinear parameters (limbfit.newton_step: the one-step jackknife the singles
+    use with many records); where the step is refused the replicate keeps them and
+    refits the linear ones. The form (the reflex's tied activation damping) is not
+    profiled for a pair: the intervals hold the data's uncertainty at this form only."""
+    prob, x = fit._problem
+    m = cfg.n_jackknife
+    reps, limbs = [], []
+    with prob.context():  # the block masks of the pair's own calibration rows
+        blocks = [lf._block_masks(preps, m, b) for b in range(m)]
+    n = preps[0].n
+    try:
+        for masks in blocks:
+            prob.masks = masks
+            xb = lf.newton_step(prob.objective, x) if prob.nl else None
+            params = prob.params(x if xb is None else xb)
+            _, sol, _, layout = prob.evaluate(params)
+            if sol is None:
+                return fit
+            reps.append({k: _reported(lf, preps, k, params[k], sol.coef, layout)
+                         for k in prob.names})
+            limbs.append(np.asarray(sol.coef[:3 * n * n], float))
+    finally:
+        prob.masks = None
+    out = {}
+    for k in prob.names:
+        out[k] = {}
+        skip = set(cat.get_effect(k).choices) | set(DESCRIPTORS)
+        for p, v in fit.params[k].items():
+            if (p in skip or isinstance(v, bool) or not isinstance(v, (int, float))
+                    or p not in reps[0][k]):
+                continue
+            vals = np.array([r[k][p] for r in reps], float)
+            se = math.sqrt((m - 1) / m * float(np.sum((vals - vals.mean()) ** 2)))
+            out[k][p] = [float(v) - 1.96 * se, float(v) + 1.96 * se]
+    fit.intervals = out
+    fit.limb_ci = lf._limb_half_widths(np.array(limbs), n)
+    # each replicate's K0 and parameters: the band of a derived curve (K over the state)
+    fit.replicates = [{"K": float(lb[0]), **r} for lb, r in zip(limbs, reps)]
+    fit.n_evaluations = prob.n_eval
+    return fit
 
 
 def _forward_cost(lf, name, cfg) -> float:
@@ -600,6 +666,8 @@ def search_pairs(lf, preps, fits, nominal, cfg, partners=None, *, run=None) -> l
             prob.n_eval += k_eval
         out.append(finish(lf, preps, first, prob, x, nominal, cfg))
     out.sort(key=lambda p: p.calibration_objective)
+    if out and out[0].adds and cfg.n_jackknife >= 2:
+        add_intervals(lf, preps, out[0], cfg)  # only the best pair can be named
     return out
 
 

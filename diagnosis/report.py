@@ -381,11 +381,11 @@ def varying_lines(pv: dict) -> list:
                                  f"time-invariant {_fmt(est['heldout_vaf_pct']['invariant'], 3)}"
                                  f" %" if est else
                                  f" (no estimate to compare: {pv.get('estimate_missing')})")
-             + ":", "", f"| {pv['scheduling']}{u} | K named model [N m/rad] | "
+             + ":", "", f"| {pv['scheduling']}{u} | K named model [N m/rad] (95 %) | "
              f"K estimate [N m/rad] (95 %) |", "|---|---|---|"]
     for pt in pv["points"]:
         e = pt.get("K_estimate")
-        lines.append(f"| {_fmt(pt['rho'], 4)} | {_fmt(pt['K'][0], 4)} | "
+        lines.append(f"| {_fmt(pt['rho'], 4)} | {_triple(pt['K'])} | "
                      + ("-" if e is None else f"{_fmt(e[0], 4)} [{_fmt(e[1], 4)}, "
                         f"{_fmt(e[2], 4)}]") + " |")
     lines += ["", f"![K over {pv['scheduling']}]({FIGURES['varying']})"]
@@ -393,7 +393,10 @@ def varying_lines(pv: dict) -> list:
         lines += ["", f"The named model's K lies inside the estimate's interval at "
                       f"{100 * pv['agreement']:.0f} % of the points (two forms fitted apart: "
                       f"the catalogue's quadratic in limbfit, the estimate's Chebyshev "
-                      f"expansion; the named K has no interval of its own here)."]
+                      f"expansion)"
+                  + ("" if pv.get("intervals_overlap") is None else
+                     f"; the two intervals overlap at {100 * pv['intervals_overlap']:.0f} %")
+                  + "."]
     rf = pv.get("reflex") or {}
     if rf.get("named") and rf.get("estimate"):
         a, b = rf["named"], rf["estimate"]
@@ -474,7 +477,12 @@ def _plot_varying(pv: dict, path: Path) -> None:
         e = np.array(est, float)
         ax.fill_between(rho, e[:, 1], e[:, 2], alpha=0.25, label="estimate, 95 %")
         ax.plot(rho, e[:, 0], "o-", ms=3, label="armimp estimate (parameter-varying)")
-    ax.plot(rho, [p["K"][0] for p in pv["points"]], "k--", label=f"named model ({pv['effect']})")
+    named = np.array([[np.nan if v is None else v for v in p["K"]] for p in pv["points"]],
+                     float)
+    if np.isfinite(named[:, 1:]).all():
+        ax.fill_between(rho, named[:, 1], named[:, 2], color="k", alpha=0.1,
+                        label="named model, 95 %")
+    ax.plot(rho, named[:, 0], "k--", label=f"named model ({pv['effect']})")
     u = f" [{pv['units']}]" if pv.get("units") else ""
     ax.set_xlabel(f"{pv['scheduling']}{u}")
     ax.set_ylabel("K [N m/rad]")

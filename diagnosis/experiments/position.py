@@ -352,7 +352,12 @@ def _pair_fit(p, fs):
     fit = EffectFit(tuple(p.effects), {k: dict(v) for k, v in p.params.items()},
                     p.calibration_gap, p.n_evaluations, held_out_gap=p.held_out_gap,
                     objective=p.calibration_objective)
-    fit.model = model_of(p.limb, fs, "limbfit with " + " + ".join(p.effects))
+    fit.model = model_of(p.limb, fs, "limbfit with " + " + ".join(p.effects),
+                         ci=p.limb_ci)
+    # the one-step jackknife of the best pair (limbpairs.add_intervals; the form is not
+    # profiled for a pair)
+    fit.intervals = p.intervals
+    fit.replicates = p.replicates
     fit.value_flags = [(k, g, "< 0 (unphysical)") for k in p.effects
                        for g in lf.LINEAR.get(k, ()) if p.params[k][g] < 0]
     fit.second_test = dict(p.test)

@@ -51,7 +51,10 @@ def build(r) -> DiagnosisReport:
     scheduling = [u for u in r.scheduling if u["trial"] in {t.name for t in r.trials}]
     if named is not None and r.experiment.kind == "position":
         from .state_profile import profile as state_profile
-        pv = state_profile(r.trials, named, scheduling)  # K(rho) beside estimate's
+        # K(rho) beside estimate's; its band from the fit's jackknife replicates (in the
+        # fit's units: none when the trials were rescaled)
+        reps = None if r.units else getattr(chosen, "replicates", None)
+        pv = state_profile(r.trials, named, scheduling, reps)
         if pv is not None:
             named["parameter_varying"] = pv
     return DiagnosisReport(
@@ -190,6 +193,11 @@ def named_model(model: dict, fitted: dict, intervals: dict, form_profile=None) -
             [float(v)] + ([float(c) for c in cis[k]] if k in cis else [None, None])
             for k, v in params.items()}
     notes = _reflex_notes(out["effects"].get("stretch_reflex"))
+    if len(out["effects"]) > 1 and intervals and not form_profile:
+        notes.append("a pair's intervals are its one-step delete-one-block jackknife at the "
+                     "form the fit ties (limbpairs.add_intervals): the form's own "
+                     "uncertainty (a reflex's activation damping) is not in them, so they are "
+                     "narrower than the single effects' form-profiled ones")
     if notes:
         out["notes"] = notes
     if form_profile:

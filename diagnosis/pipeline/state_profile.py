@@ -31,7 +31,17 @@ def _estimate(trials, reflex: bool):
     return fits[0] if fits else None
 
 
-def profile(trials, named_model: dict, scheduling: list) -> dict | None:
+def _band(replicates, name, rho):
+    """(lo, hi) 95 % jackknife band of K(rho) from the fit's replicates, or None."""
+    if not replicates or any(name not in r for r in replicates):
+        return None
+    ks = np.array([_named_k(r["K"], r[name], rho) for r in replicates])
+    m = ks.shape[0]
+    se = np.sqrt((m - 1) / m * np.sum((ks - ks.mean(axis=0)) ** 2, axis=0))
+    return se
+
+
+def profile(trials, named_model: dict, scheduling: list, replicates=None) -> dict | None:
     """``{"scheduling", "units", "form", "points": [{"rho", "K": [v, lo, hi],
     "K_estimate": [v, lo, hi] | None}], "estimate": {...} | None, "agreement",
     "reflex": {"named", "estimate"} | None}`` (each reflex's delay_ms, frequency_hz,
@@ -42,8 +52,9 @@ def profile(trials, named_model: dict, scheduling: list) -> dict | None:
     report's ``named_model`` (K in N m/rad, effect parameters as ``[value, lo, hi]``);
     ``scheduling``: the report's ``scheduling`` entries (name, units per trial).
     ``agreement``: the share of points where the named K lies inside the estimate's
-    interval. K's own interval is None: the named fit's K0 and shape carry no joint
-    interval yet (a pair's fit gives none)."""
+    interval. ``replicates`` ([{"K": K0, effect: params}], a pair's jackknife,
+    diagnosis.limbpairs.add_intervals): K's 95 % band, 1.96 jackknife standard errors of
+    K(rho) over them; without them K's interval is None."""
     effects = (named_model or {}).get("effects") or {}
     name = next((e for e in STATE_EFFECTS if e in effects), None)
     if name is None or len(trials) != 1 or trials[0].n_dof != 1:
@@ -62,15 +73,21 @@ def profile(trials, named_model: dict, scheduling: list) -> dict | None:
         mid, half = float(p["rho_mid"]), float(p["rho_half_range"])
         rho = np.linspace(mid - half, mid + half, N_POINTS)
     k = _named_k(k0, p, rho)
+    se = _band(replicates, name, rho)
     pts = []
     for i, r in enumerate(rho):
-        pt = {"rho": float(r), "K": [float(k[i]), None, None]}
+        pt = {"rho": float(r), "K": [float(k[i])] + ([None, None] if se is None else
+                                                    [float(k[i] - 1.96 * se[i]),
+                                                     float(k[i] + 1.96 * se[i])])}
         pt["K_estimate"] = (None if est is None else
                             [float(est.values["K"][i]), float(est.lo["K"][i]),
                              float(est.hi["K"][i])])
         pts.append(pt)
     inside = [pt["K_estimate"][1] <= pt["K"][0] <= pt["K_estimate"][2]
               for pt in pts if pt["K_estimate"] is not None]
+    # the two 95 % intervals overlap (where the named one is known)
+    overlap = [max(pt["K_estimate"][1], pt["K"][1]) <= min(pt["K_estimate"][2], pt["K"][2])
+               for pt in pts if pt["K_estimate"] is not None and pt["K"][1] is not None]
     reflex = None
     if "stretch_reflex" in effects:
         from .report import reflex_latency
@@ -94,4 +111,5 @@ def profile(trials, named_model: dict, scheduling: list) -> dict | None:
             "estimate_missing": why,
             # the two reflex pathways' delays: pure, and with the activation's lag
             "reflex": reflex,
-            "agreement": None if not inside else float(np.mean(inside))}
+            "agreement": None if not inside else float(np.mean(inside)),
+            "intervals_overlap": None if not overlap else float(np.mean(overlap))}

@@ -89,6 +89,13 @@ def test_the_moving_ankle_gives_k_over_its_angle_and_an_honest_reduction(tmp_pat
     assert pv["points"][-1]["K"][0] > 2 * min(p["K"][0] for p in pv["points"])
     assert pv["points"][-1]["K_estimate"][0] > 2 * pv["points"][0]["K_estimate"][0]
     assert 0.0 <= pv["agreement"] <= 1.0
+    # the named pair's jackknife gives K0 and K(sv) intervals (limbpairs.add_intervals)
+    k0 = rep["named_model"]["K"]
+    assert k0[1] < k0[0] < k0[2]
+    assert all(p["K"][1] < p["K"][0] < p["K"][2] for p in pv["points"])
+    assert 0.0 <= pv["intervals_overlap"] <= 1.0
+    gain = rep["named_model"]["effects"]["stretch_reflex"]["gain"]
+    assert gain[1] < gain[0] < gain[2]
     # the named model re-simulated as reported (K over sv) reproduces the FRF features
     # better than the nominal limb (before: K0 alone, 22.7 -> 34)
     feat = rep["gap"]["features"]
