@@ -313,6 +313,8 @@ class PairFit:
     limb_ci: dict | None = None
     #: the jackknife replicates: [{"K": K0 of joint 1, effect: params}] (add_intervals)
     replicates: list | None = None
+    #: {effect: form-profile record} (:func:`profile_pair`); None when not profiled
+    form_profile: dict | None = None
 
     @property
     def adds(self) -> bool:
@@ -328,7 +330,8 @@ class PairFit:
                 "second_effect_test": self.test,
                 **({"split": self.split} if self.split else {}),
                 **({"intervals": self.intervals, "limb_ci": self.limb_ci,
-                    "replicates": self.replicates} if self.intervals else {})}
+                    "replicates": self.replicates} if self.intervals else {}),
+                **({"form_profile": self.form_profile} if self.form_profile else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PairFit":
@@ -338,7 +341,7 @@ class PairFit:
                    None if d["held_out_reduction"] is None else float(d["held_out_reduction"]),
                    list(d["at_search_bound"]), int(d["n_evaluations"]),
                    dict(d["second_effect_test"]), d.get("split"), d.get("intervals"),
-                   d.get("limb_ci"), d.get("replicates"))
+                   d.get("limb_ci"), d.get("replicates"), d.get("form_profile"))
 
 
 def _split_of(preps, names):
@@ -668,6 +671,8 @@ def search_pairs(lf, preps, fits, nominal, cfg, partners=None, *, run=None) -> l
     out.sort(key=lambda p: p.calibration_objective)
     if out and out[0].adds and cfg.n_jackknife >= 2:
         add_intervals(lf, preps, out[0], cfg)  # only the best pair can be named
+        if cfg.form_profile:  # and its intervals include the form (profile_pair)
+            profile_pair(lf, preps, out[0], nominal, cfg)
     return out
 
 
@@ -680,3 +685,131 @@ def named_pair(pairs, name_reduction: float):
     if p.adds and p.held_out_reduction is not None and p.held_out_reduction >= name_reduction:
         return p
     return None
+
+
+def profile_pair(lf, preps, fit: PairFit, nominal, cfg) -> dict | None:
+    """Intervals that include the form, for a pair (issue 21, item 2): the pair refitted
+    (both effects' nonlinear parameters refined jointly, K, B, I and the gains solved
+    again) at every alternative of each member's tied or picked choices
+    (diagnosis.formprofile.alternatives: the reflex's activation damping, threshold and
+    rectification, the servo's damping, the wobbling mass's damping), one member at a
+    time; an alternative the data do not reject (formprofile.keep_tolerance on the
+    calibration gap, against the best profiled one) gets its one-step jackknife
+    (:func:`add_intervals`), and every parameter's interval becomes the envelope over
+    the kept choices, the limb's K, B, I half-widths likewise (symmetric about the
+    point estimate, the largest distance to an end of a kept interval); a delay's also
+    +- half a sample period (the delay model's resolution). The point estimate stays the
+    pair's own (unlike a single's profile, which moves it to the best-fitting choice).
+
+    ``fit`` must hold its jackknife intervals (:func:`add_intervals`). Sets
+    ``fit.intervals``, ``fit.limb_ci`` and ``fit.form_profile`` ({effect: record, as
+    formprofile.profile's}); returns the latter, None when no member has alternatives."""
+    from types import SimpleNamespace
+    from . import formprofile as fpm
+    if fit.intervals is None or not hasattr(fit, "_problem"):
+        return None
+    prob, x = fit._problem
+    alts = [(k, label, fixed) for k in prob.names if fpm.profiled(k)
+            for label, fixed in fpm.alternatives(k, prob.fixed[k])]
+    if not alts:
+        return None
+    limb0 = nominal["limb"]
+    n = preps[0].n
+    n_eval0 = prob.n_eval
+
+    def scored(pa, xa):
+        params = pa.params(xa)
+        o, sol, ang, layout = pa.evaluate(params)
+        if sol is None or not math.isfinite(o):
+            return None
+        g_cal, _ = _gaps(lf, preps, sol, ang, limb0, cfg, pa.split)
+        rep = {k: _reported(lf, preps, k, params[k], sol.coef, layout) for k in pa.names}
+        return g_cal, rep, np.asarray(sol.coef[:3 * n * n], float)
+
+    own = scored(prob, np.asarray(x, float))
+    if own is None:
+        return None
+    rows = [{"effect": None, "choice": "the fit's", "gap": own[0], "params": own[1],
+             "limb": own[2], "intervals": fit.intervals, "limb_ci": fit.limb_ci,
+             "kept": True, "_prob": (prob, np.asarray(x, float))}]
+    n_eval = 0
+    for k, label, fixed in alts:
+        pa = PairProblem(lf, preps, prob.names, {**prob.fixed, k: fixed}, cfg, prob.split,
+                         prob.unit)
+        xa = refine(pa, np.asarray(x, float))
+        s = scored(pa, xa)
+        n_eval += pa.n_eval
+        if s is None:
+            continue
+        rows.append({"effect": k, "choice": label, "gap": s[0], "params": s[1],
+                     "limb": s[2], "intervals": None, "limb_ci": None, "kept": False,
+                     "_prob": (pa, xa)})
+    best = min(rows, key=lambda r: r["gap"].excess)
+    tol = fpm.keep_tolerance(best["gap"], cfg)
+    for r in rows[1:]:
+        r["kept"] = bool(r["gap"].excess - best["gap"].excess <= tol)
+        if r["kept"]:
+            pa, xa = r["_prob"]
+            k0 = pa.n_eval
+            shell = SimpleNamespace(_problem=(pa, xa), params=r["params"], intervals=None,
+                                    limb_ci=None, replicates=None, n_evaluations=0)
+            add_intervals(lf, preps, shell, cfg)
+            n_eval += pa.n_eval - k0
+            r["intervals"], r["limb_ci"] = shell.intervals, shell.limb_ci
+    kept = [r for r in rows if r["kept"] and r["intervals"] is not None]
+    half_delay = 0.5 / min(pr.fs for pr in preps)
+    envelope = {}
+    for k, ci in fit.intervals.items():
+        envelope[k] = {}
+        for p in ci:
+            lo = min(r["intervals"][k][p][0] for r in kept if p in r["intervals"].get(k, {}))
+            hi = max(r["intervals"][k][p][1] for r in kept if p in r["intervals"].get(k, {}))
+            if p == "delay_s":
+                lo, hi = lo - half_delay, hi + half_delay
+            envelope[k][p] = [float(lo), float(hi)]
+    limb_ci = fit.limb_ci
+    if fit.limb_ci is not None and all(r["limb_ci"] is not None for r in kept):
+        v0 = own[2]
+        half = np.zeros_like(v0)
+        for r in kept:
+            h = np.concatenate([np.asarray(r["limb_ci"][q], float).reshape(-1)
+                                for q in ("K_h", "B_h", "M_h")])
+            half = np.maximum(half, np.abs(r["limb"] - v0) + h)
+        nn = n * n
+        limb_ci = {q: half[i * nn:(i + 1) * nn].reshape(n, n).tolist()
+                   for i, q in enumerate(("K_h", "B_h", "M_h"))}
+    rule = ("the pair refitted at each member's alternatives; an alternative is kept when "
+            "its calibration gap exceeds the best profiled one's by at most "
+            f"significance_sigma standard errors plus floor_margin of its floor ({tol:.3g}); "
+            "the interval is the envelope of the kept one-step jackknife intervals (a "
+            "delay's also +- half a sample period); the point estimate is the pair's own")
+    records = {}
+    for k in prob.names:
+        if not fpm.profiled(k):
+            continue
+        own_fixed = prob.fixed[k]
+        records[k] = {
+            "profiled": {q: list(v) for q, v in fpm.FORM_GRID[k].items()
+                         if q != "threshold_rad_s" or own_fixed.get("rectified")},
+            "rule": rule,
+            "alternatives": [{"choice": r["choice"] if r["effect"] in (None, k) else
+                              f"{r['effect']}: {r['choice']}",
+                              "params": r["params"][k],
+                              "calibration_gap": float(r["gap"].value),
+                              "calibration_excess": float(r["gap"].excess),
+                              "intervals": None if r["intervals"] is None else
+                              r["intervals"].get(k),
+                              "kept": r["kept"]} for r in rows],
+            "jackknife_intervals": dict(fit.intervals.get(k, {})),
+            "jackknife_limb_ci": fit.limb_ci,
+            "intervals": envelope.get(k, {}),
+            "best_fitting": best["choice"] if best["effect"] in (None, k) else
+            f"{best['effect']}: {best['choice']}",
+            "point_estimate_changed": False,
+            "delay_resolution_s": half_delay,
+            "n_evaluations": int(n_eval)}
+    fit.intervals = envelope
+    fit.limb_ci = limb_ci
+    fit.form_profile = records
+    fit.n_evaluations = int(n_eval0 + n_eval)
+    return records

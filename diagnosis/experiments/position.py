@@ -354,9 +354,10 @@ def _pair_fit(p, fs):
                     objective=p.calibration_objective)
     fit.model = model_of(p.limb, fs, "limbfit with " + " + ".join(p.effects),
                          ci=p.limb_ci)
-    # the one-step jackknife of the best pair (limbpairs.add_intervals; the form is not
-    # profiled for a pair)
+    # the one-step jackknife of the best pair (limbpairs.add_intervals), its envelope
+    # over the members' form alternatives (limbpairs.profile_pair)
     fit.intervals = p.intervals
+    fit.form_profile = p.form_profile
     fit.replicates = p.replicates
     fit.value_flags = [(k, g, "< 0 (unphysical)") for k in p.effects
                        for g in lf.LINEAR.get(k, ()) if p.params[k][g] < 0]
