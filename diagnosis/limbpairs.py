@@ -778,11 +778,19 @@ def profile_pair(lf, preps, fit: PairFit, nominal, cfg) -> dict | None:
         nn = n * n
         limb_ci = {q: half[i * nn:(i + 1) * nn].reshape(n, n).tolist()
                    for i, q in enumerate(("K_h", "B_h", "M_h"))}
+    # and the pipeline's own form: its derivatives (limbfit.derivative_allowance)
+    allowance = None
+    if limb_ci is not None:
+        allowance = lf.derivative_allowance(preps, lf._limb_from(own[2], n))
+        limb_ci = {q: (np.asarray(limb_ci[q], float) + np.asarray(allowance[q], float)).tolist()
+                   for q in limb_ci}
     rule = ("the pair refitted at each member's alternatives; an alternative is kept when "
             "its calibration gap exceeds the best profiled one's by at most "
             f"significance_sigma standard errors plus floor_margin of its floor ({tol:.3g}); "
             "the interval is the envelope of the kept one-step jackknife intervals (a "
-            "delay's also +- half a sample period); the point estimate is the pair's own")
+            "delay's also +- half a sample period; the limb's half-widths also plus what the "
+            "pipeline's derivatives move K, B, I by, limbfit.derivative_allowance); the point "
+            "estimate is the pair's own")
     records = {}
     for k in prob.names:
         if not fpm.profiled(k):
@@ -802,6 +810,7 @@ def profile_pair(lf, preps, fit: PairFit, nominal, cfg) -> dict | None:
                               "kept": r["kept"]} for r in rows],
             "jackknife_intervals": dict(fit.intervals.get(k, {})),
             "jackknife_limb_ci": fit.limb_ci,
+            "derivative_allowance": allowance,
             "intervals": envelope.get(k, {}),
             "best_fitting": best["choice"] if best["effect"] in (None, k) else
             f"{best['effect']}: {best['choice']}",

@@ -204,7 +204,8 @@ def named_model(model: dict, fitted: dict, intervals: dict, form_profile=None) -
         out["form_profile"] = {
             e: {k: rec.get(k) for k in ("profiled", "best_fitting", "point_estimate_changed",
                                        "jackknife_intervals", "alternatives", "rule",
-                                       "delay_resolution_s", "jackknife_limb_ci")}
+                                       "delay_resolution_s", "jackknife_limb_ci",
+                                       "derivative_allowance")}
             for e, rec in form_profile.items() if rec}
     return out
 
@@ -246,9 +247,10 @@ def _profile_in_units(profile: dict, rho: float) -> dict:
         conv = lambda d: _effects_in_units({e: d}, rho)[e] if d else d  # noqa: E731
         rec["intervals"] = conv(rec.get("intervals"))
         rec["jackknife_intervals"] = conv(rec.get("jackknife_intervals"))
-        if rec.get("jackknife_limb_ci"):  # a pair's (limbpairs.profile_pair)
-            rec["jackknife_limb_ci"] = {k: (np.asarray(v, float) * rho).tolist()
-                                        for k, v in rec["jackknife_limb_ci"].items()}
+        for key in ("jackknife_limb_ci", "derivative_allowance"):  # a pair's (profile_pair)
+            if rec.get(key):
+                rec[key] = {k: (np.asarray(v, float) * rho).tolist()
+                            for k, v in rec[key].items()}
         rec["alternatives"] = [{**a, "params": conv(a.get("params")),
                                 "intervals": conv(a.get("intervals"))}
                                for a in rec.get("alternatives") or []]

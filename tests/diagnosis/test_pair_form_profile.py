@@ -36,4 +36,9 @@ def test_the_named_pairs_intervals_cover_a_reflex_of_another_damping():
     b, hb = np.atleast_2d(pair["B"])[0, 0], np.atleast_2d(pair["limb_ci"]["B_h"])[0, 0]
     hb0 = np.atleast_2d(fp["stretch_reflex"]["jackknife_limb_ci"]["B_h"])[0, 0]
     assert hb >= hb0
+    # plus what the pipeline's central differences move the limb by (the inertia's most)
+    allow = fp["stretch_reflex"]["derivative_allowance"]
+    assert np.atleast_2d(allow["M_h"])[0, 0] > 0
+    i, hi = np.atleast_2d(pair["I"])[0, 0], np.atleast_2d(pair["limb_ci"]["M_h"])[0, 0]
+    assert abs(i - spec.limb.I) <= hi
     assert abs(b - spec.limb.B) <= hb
