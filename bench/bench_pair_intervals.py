@@ -7,9 +7,9 @@ stretch_reflex + channel_delay, the truth's reflex delay and activation frequenc
 channel delay and the limb's K, B, I are scored against the pair's intervals
 
 - ``jackknife``: the one-step delete-one-block jackknife at the tied form
-  (limbpairs.PROFILE_FORM off), and
-- ``form``: the envelope over the profiled form choices the data do not reject
-  (limbpairs.add_intervals, the default).
+  (FitConfig.form_profile off), and
+- ``form``: the envelope over the profiled form choices the data do not reject, plus
+  the pipeline's derivative allowance on K, B, I (limbpairs.profile_pair, the default).
 
 Coverage with Wilson 95 % intervals and the median width relative to the value
 (target of issue 21: truth inside in >= 80 %, width under a third of the value).
@@ -34,7 +34,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import labsim  # noqa: E402
 from benchio import wilson, write_results  # noqa: E402
 from diagnosis import limbfit as lf  # noqa: E402
-from diagnosis import limbpairs as lp  # noqa: E402
 
 EFFECTS = ("stretch_reflex", "channel_delay", "wobbling_mass")
 DELAY_S = 0.010
@@ -76,12 +75,10 @@ def main(argv=None) -> int:
         row = {"seed": seed, "damping": spec.reflex.damping,
                "threshold_rad_s": spec.reflex.threshold_rad_s}
         for mode, on in (("jackknife", False), ("form", True)):
-            lp.PROFILE_FORM = on
-            d = lf.diagnose_position([trial], lf.FitConfig(effects=EFFECTS))
+            d = lf.diagnose_position([trial], lf.FitConfig(effects=EFFECTS, form_profile=on))
             row[f"named_{mode}"] = d.named
             if d.named == ["stretch_reflex", "channel_delay"]:
                 row[mode] = score(d.pairs[0], spec)
-        lp.PROFILE_FORM = True
         rows.append(row)
         print(f"seed {seed}: named {row['named_form']} ({time.perf_counter() - t0:.0f} s)",
               flush=True)

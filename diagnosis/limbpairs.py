@@ -218,7 +218,8 @@ class PairProblem:
                 built = [pair_columns(pr, params) for pr in preps]
             except ValueError:
                 return math.inf, None, None, None
-            masks = self.masks if self.active is None else None
+            masks = (self.masks if self.masks is None or self.active is None
+                     else [self.masks[i] for i in self.active])
             sol = lf._solve(preps, [c for c, _ in built], masks)
             ang = [lf._angle_residual(pr, params.get("servo_bandwidth")) for pr in preps]
             obj = sol.cal_energy
@@ -563,6 +564,21 @@ def finish(lf, preps, single, prob, x, nominal, cfg) -> PairFit:
 DESCRIPTORS = ("rho_mid", "rho_half_range", "n_changes")
 
 
+def _shrunk(reps, limbs, scale):
+    """The jackknife replicates moved towards their mean by ``scale`` (numbers only)."""
+    limbs = np.asarray(limbs, float)
+    limbs = limbs.mean(axis=0) + scale * (limbs - limbs.mean(axis=0))
+    out = [{k: dict(v) for k, v in r.items()} for r in reps]
+    for k in reps[0]:
+        for p, v in reps[0][k].items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                continue
+            vals = np.array([r[k][p] for r in reps], float)
+            for r, y in zip(out, vals.mean() + scale * (vals - vals.mean())):
+                r[k][p] = float(y)
+    return out, list(limbs)
+
+
 def add_intervals(lf, preps, fit: PairFit, cfg) -> PairFit:
     """95 % delete-one-block jackknife intervals of a pair's parameters and limb, in place.
 
@@ -571,8 +587,17 @@ def add_intervals(lf, preps, fit: PairFit, cfg) -> PairFit:
     fit's nonlinear parameters (limbfit.newton_step: the one-step jackknife the singles
     use with many records); where the step is refused the replicate keeps them and
     refits the linear ones. The form (the reflex's tied activation damping) is not
-    profiled for a pair: the intervals hold the data's uncertainty at this form only."""
+    profiled here: the intervals hold the data's uncertainty at this form only
+    (:func:`profile_pair` widens them). With more records than ``cfg.search_trials`` the
+    replicates run on the search's subset of records (limbfit.on_subset), their spread
+    scaled by the square root of the subset's share of the calibration rows (exchangeable
+    records of one condition), so a session of 200 trials costs what 16 do."""
     prob, x = fit._problem
+    if lf.many_records(prob) and prob.active is None:
+        rows = np.array([int(pr.cal.sum()) for pr in preps], float)
+        idx = np.unique(np.linspace(0, len(preps) - 1, cfg.search_trials).round().astype(int))
+        fit.jackknife_scale = math.sqrt(rows[idx].sum() / rows.sum())
+        return lf.on_subset(prob, add_intervals, lf, preps, fit, cfg)
     m = cfg.n_jackknife
     reps, limbs = [], []
     with prob.context():  # the block masks of the pair's own calibration rows
@@ -591,6 +616,9 @@ def add_intervals(lf, preps, fit: PairFit, cfg) -> PairFit:
             limbs.append(np.asarray(sol.coef[:3 * n * n], float))
     finally:
         prob.masks = None
+    scale = getattr(fit, "jackknife_scale", 1.0)
+    if scale != 1.0:
+        reps, limbs = _shrunk(reps, limbs, scale)
     out = {}
     for k in prob.names:
         out[k] = {}
@@ -709,6 +737,10 @@ def profile_pair(lf, preps, fit: PairFit, nominal, cfg) -> dict | None:
     if fit.intervals is None or not hasattr(fit, "_problem"):
         return None
     prob, x = fit._problem
+    if lf.many_records(prob):
+        # refits of every alternative on all records would cost more than the pair's
+        # search: the intervals stay the jackknife's at the tied form (said in the report)
+        return None
     alts = [(k, label, fixed) for k in prob.names if fpm.profiled(k)
             for label, fixed in fpm.alternatives(k, prob.fixed[k])]
     if not alts:

@@ -197,7 +197,8 @@ def named_model(model: dict, fitted: dict, intervals: dict, form_profile=None) -
         notes.append("a pair's intervals are its one-step delete-one-block jackknife at the "
                      "form the fit ties (limbpairs.add_intervals): the form's own "
                      "uncertainty (a reflex's activation damping) is not in them, so they are "
-                     "narrower than the single effects' form-profiled ones")
+                     "narrower than the single effects' form-profiled ones (the form is "
+                     "profiled, limbpairs.profile_pair, with at most search_trials records)")
     if notes:
         out["notes"] = notes
     if form_profile:

@@ -223,13 +223,13 @@ def test_a_named_pairs_intervals_include_the_reflex_form():
     """labsim seed 2: the reflex's activation damping is 0.80 (the fit ties 0.7). The
     pair's jackknife at the tied form excludes the truth's reflex delay, frequency and B
     (bench/bench_pair_intervals.py); the envelope over the form choices the data keep
-    covers them (limbpairs.add_intervals)."""
+    covers them (limbpairs.profile_pair)."""
     trial, spec = labsim_trial("channel_delay+reflex", seed=2, channel_delay_s=0.010)
     d = lf.diagnose_position([trial], lf.FitConfig(effects=EFFECTS))
     assert d.named == ["stretch_reflex", "channel_delay"]
     p = d.pairs[0]
-    rec = p["form_profile"]
-    assert "stretch_reflex" in rec["profiled"] and len(rec["kept"]) > 1, rec
+    rows = p["form_profile"]["stretch_reflex"]["alternatives"]
+    assert any(r["kept"] and r["choice"] != "the fit's" for r in rows), rows
     iv = p["intervals"]["stretch_reflex"]
     assert iv["delay_s"][0] <= spec.reflex.delay_s <= iv["delay_s"][1], iv
     assert iv["frequency_hz"][0] <= spec.reflex.f_hz <= iv["frequency_hz"][1], iv
