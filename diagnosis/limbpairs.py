@@ -570,8 +570,8 @@ def add_intervals(lf, preps, fit: PairFit, cfg) -> PairFit:
     calibration rows (on the pair's own split) and takes one Newton step from the full
     fit's nonlinear parameters (limbfit.newton_step: the one-step jackknife the singles
     use with many records); where the step is refused the replicate keeps them and
-    refits the linear ones. The form (the reflex's tied activation damping) is not
-    profiled for a pair: the intervals hold the data's uncertainty at this form only."""
+    refits the linear ones. The intervals hold the data's uncertainty at this form only:
+    :func:`profile_pair` widens them to the envelope over the members' form alternatives."""
     prob, x = fit._problem
     m = cfg.n_jackknife
     reps, limbs = [], []
