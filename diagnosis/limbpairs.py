@@ -761,7 +761,8 @@ def profile_pair(lf, preps, fit: PairFit, nominal, cfg) -> dict | None:
     own = scored(prob, np.asarray(x, float))
     if own is None:
         return None
-    rows = [{"effect": None, "choice": "the fit's", "gap": own[0], "params": own[1],
+    rows = [{"effect": None, "fixed": prob.fixed, "choice": "the fit's", "gap": own[0],
+             "params": own[1],
              "limb": own[2], "intervals": fit.intervals, "limb_ci": fit.limb_ci,
              "kept": True, "_prob": (prob, np.asarray(x, float))}]
     n_eval = 0
@@ -773,7 +774,8 @@ def profile_pair(lf, preps, fit: PairFit, nominal, cfg) -> dict | None:
         n_eval += pa.n_eval
         if s is None:
             continue
-        rows.append({"effect": k, "choice": label, "gap": s[0], "params": s[1],
+        rows.append({"effect": k, "fixed": pa.fixed, "choice": label, "gap": s[0],
+                     "params": s[1],
                      "limb": s[2], "intervals": None, "limb_ci": None, "kept": False,
                      "_prob": (pa, xa)})
     best = min(rows, key=lambda r: r["gap"].excess)
@@ -789,13 +791,20 @@ def profile_pair(lf, preps, fit: PairFit, nominal, cfg) -> dict | None:
             n_eval += pa.n_eval - k0
             r["intervals"], r["limb_ci"] = shell.intervals, shell.limb_ci
     kept = [r for r in rows if r["kept"] and r["intervals"] is not None]
+    # a truth between a kept grid value and a rejected neighbour: bisected to where the
+    # data reject the choice (formprofile._edges, for the pair)
+    keep = lambda g: g.excess - best["gap"].excess <= tol  # noqa: E731
+    mids, k_edges = _pair_edges(lf, preps, prob, rows, keep, scored)
+    n_eval += k_edges
     half_delay = 0.5 / min(pr.fs for pr in preps)
     envelope = {}
     for k, ci in fit.intervals.items():
         envelope[k] = {}
         for p in ci:
-            lo = min(r["intervals"][k][p][0] for r in kept if p in r["intervals"].get(k, {}))
-            hi = max(r["intervals"][k][p][1] for r in kept if p in r["intervals"].get(k, {}))
+            lo = min([r["intervals"][k][p][0] for r in kept if p in r["intervals"].get(k, {})]
+                     + [m[0][k][p] for m in mids if p in m[0].get(k, {})])
+            hi = max([r["intervals"][k][p][1] for r in kept if p in r["intervals"].get(k, {})]
+                     + [m[0][k][p] for m in mids if p in m[0].get(k, {})])
             if p == "delay_s":
                 lo, hi = lo - half_delay, hi + half_delay
             envelope[k][p] = [float(lo), float(hi)]
@@ -807,6 +816,10 @@ def profile_pair(lf, preps, fit: PairFit, nominal, cfg) -> dict | None:
             h = np.concatenate([np.asarray(r["limb_ci"][q], float).reshape(-1)
                                 for q in ("K_h", "B_h", "M_h")])
             half = np.maximum(half, np.abs(r["limb"] - v0) + h)
+        h0 = np.concatenate([np.asarray(fit.limb_ci[q], float).reshape(-1)
+                             for q in ("K_h", "B_h", "M_h")])
+        for _, lb in mids:  # a bisection's limb, with the fit's own scatter
+            half = np.maximum(half, np.abs(lb - v0) + h0)
         nn = n * n
         limb_ci = {q: half[i * nn:(i + 1) * nn].reshape(n, n).tolist()
                    for i, q in enumerate(("K_h", "B_h", "M_h"))}
@@ -854,3 +867,54 @@ def profile_pair(lf, preps, fit: PairFit, nominal, cfg) -> dict | None:
     fit.form_profile = records
     fit.n_evaluations = int(n_eval0 + n_eval)
     return records
+
+
+def _pair_edges(lf, preps, prob, rows, keep, scored) -> tuple:
+    """formprofile._edges for a pair: between a kept grid value of a member's tied
+    continuous choice and a rejected neighbour, formprofile.BISECTIONS refits half-way
+    (geometric), each kept one joining the envelope, then the parameters and limb
+    interpolated half-way between the last kept and the last rejected. Returns
+    ([(reported params {effect: {param: value}}, limb coefficients)], evaluations)."""
+    from . import formprofile as fpm
+    out, n_eval = [], 0
+    own = rows[0]["fixed"]
+    for k in prob.names:
+        tied = lm.DEFAULTS.get(k, {})
+        for key in fpm.FORM_GRID.get(k, {}):
+            def value(r):
+                return float(r["fixed"][k].get(key, tied.get(key, 0.0)))
+            line = [rows[0]] + [r for r in rows[1:] if r["effect"] == k and all(
+                r["fixed"][k].get(c) == own[k].get(c)
+                for c in set(own[k]) | set(r["fixed"][k]) if c != key)]
+            if len(line) < 2:
+                continue
+            line.sort(key=value)
+            for a, b in zip(line, line[1:]):
+                if a["kept"] == b["kept"]:
+                    continue
+                good, bad = (a, b) if a["kept"] else (b, a)
+                zg, zb = value(good), value(bad)
+                pg, lg, xg = good["params"], good["limb"], good["_prob"][1]
+                pb, lb = bad["params"], bad["limb"]
+                for _ in range(fpm.BISECTIONS):
+                    zm = math.sqrt(zg * zb) if min(zg, zb) > 0 else 0.5 * (zg + zb)
+                    pa = PairProblem(lf, preps, prob.names,
+                                     {**own, k: {**own[k], key: zm}}, prob.cfg, prob.split,
+                                     prob.unit)
+                    xm = refine(pa, np.asarray(xg, float))
+                    sm = scored(pa, xm)
+                    n_eval += pa.n_eval
+                    if sm is None:
+                        zb = zm
+                        continue
+                    if keep(sm[0]):
+                        zg, pg, lg, xg = zm, sm[1], sm[2], xm
+                        out.append((sm[1], sm[2]))
+                    else:
+                        zb, pb, lb = zm, sm[1], sm[2]
+                half = {e: {q: 0.5 * (v + pb[e][q]) for q, v in pg[e].items()
+                            if isinstance(v, (int, float)) and not isinstance(v, bool)
+                            and isinstance(pb[e].get(q), (int, float))}
+                        for e in pg}
+                out.append((half, 0.5 * (lg + lb)))
+    return out, n_eval
