@@ -15,8 +15,6 @@ import sys
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 import trialformat as tf
 from trialformat.cliargs import MAX_FFT, number
 
@@ -540,6 +538,7 @@ def k_by_model(r) -> str | None:
     questions (issue 21: five unlabelled K values on the moving ankle)."""
     if r.n_dof != 1:
         return None
+    import numpy as np  # not at the top: `armimp --help` loads no numpy
     u = "N m/rad"
     parts = [f"FRF fit {r.band_hz[0]:.3g}-{r.band_hz[1]:.3g} Hz {r.fit.K[0, 0]:.4g}"
              f"±{r.fit.K_ci[0, 0]:.2g}"]
