@@ -847,10 +847,9 @@ def _accurate_derivatives(theta, fs):
     return omega, alpha
 
 
-def _clean_residuals(preps, limb: lm.LimbModel):
-    """The pipeline's residual (per record, low-passed, decimated) on a noise-free torque
-    of ``limb`` simulated from each record's own measured angle with accurate
-    derivatives, fitted as the nominal model is (shared K, B, I, offsets per record)."""
+def _clean_proxies(preps, limb: lm.LimbModel):
+    """Copies of the records whose low-passed torque is a noise-free torque of ``limb``
+    simulated from each record's own measured angle with accurate derivatives."""
     import copy
     proxies = []
     for pr in preps:
@@ -860,7 +859,14 @@ def _clean_residuals(preps, limb: lm.LimbModel):
         q = copy.copy(pr)
         q.tau_lp = pr.lp(tau)
         proxies.append(q)
-    return _solve(proxies, [pr.base for pr in preps]).residual
+    return proxies
+
+
+def _clean_residuals(preps, limb: lm.LimbModel):
+    """The pipeline's residual (per record, low-passed, decimated) on a noise-free torque
+    of ``limb`` (:func:`_clean_proxies`), fitted as the nominal model is (shared K, B, I,
+    offsets per record)."""
+    return _solve(_clean_proxies(preps, limb), [pr.base for pr in preps]).residual
 
 
 def derivative_allowance(preps, limb: lm.LimbModel) -> dict:
@@ -873,16 +879,8 @@ def derivative_allowance(preps, limb: lm.LimbModel) -> dict:
     viscosity ~0.4 % high at a 40 Hz band, 1 kHz: the stencil's gain falls as
     1 - (w h)^2 / 3 for the acceleration). A choice of the pipeline's form, like the
     effects' tied choices: truth and fit differ by it whatever the data."""
-    import copy
-    proxies = []
-    for pr in preps:
-        th = pr.rec.theta
-        om, al = _accurate_derivatives(th, pr.fs)
-        tau = th @ limb.K.T + om @ limb.B.T + al @ limb.I.T
-        q = copy.copy(pr)
-        q.tau_lp = pr.lp(tau)
-        proxies.append(q)
-    fitted = _limb_from(_solve(proxies, [pr.base for pr in preps]).coef, preps[0].n)
+    fitted = _limb_from(_solve(_clean_proxies(preps, limb), [pr.base for pr in preps]).coef,
+                        preps[0].n)
     return {"K_h": np.abs(fitted.K - limb.K).tolist(), "B_h": np.abs(fitted.B - limb.B).tolist(),
             "M_h": np.abs(fitted.I - limb.I).tolist()}
 
