@@ -102,6 +102,23 @@ def _own_label(name, fixed):
     return ", ".join(parts) + " (the fit's)"
 
 
+def flat_ci(ci: dict) -> np.ndarray:
+    """The K, B, I half-widths {"K_h", "B_h", "M_h"} as one (3 n^2,) vector, the limb
+    coefficients' order."""
+    return np.concatenate([np.asarray(ci[k], float).reshape(-1) for k in ("K_h", "B_h", "M_h")])
+
+
+def covering_half_widths(v0, items, n: int) -> dict:
+    """{"K_h", "B_h", "M_h"}: half-widths about the limb coefficients ``v0`` (3 n^2,)
+    covering every interval ``limb +- half`` of ``items`` [(limb, half)]."""
+    half = np.zeros_like(np.asarray(v0, float))
+    for limb, h in items:
+        half = np.maximum(half, np.abs(np.asarray(limb, float) - v0) + h)
+    nn = n * n
+    return {key: half[i * nn:(i + 1) * nn].reshape(n, n).tolist()
+            for i, key in enumerate(("K_h", "B_h", "M_h"))}
+
+
 def keep_tolerance(gap, cfg) -> float:
     """How much more calibration gap than the best profiled choice a kept choice may
     leave: ``significance_sigma`` standard errors of the best's gap plus ``floor_margin``
@@ -203,15 +220,8 @@ def profile(lf, fit, cfg) -> dict | None:
     # the limb: symmetric half-widths about the point estimate covering every kept interval
     limb_ci = None
     if all(r["limb_ci"] is not None for r in kept):
-        v0 = best["limb"]
-        half = np.zeros_like(v0)
-        for r in kept:
-            h = np.concatenate([np.asarray(r["limb_ci"][k], float).reshape(-1)
-                                for k in ("K_h", "B_h", "M_h")])
-            half = np.maximum(half, np.abs(r["limb"] - v0) + h)
-        nn = n * n
-        limb_ci = {key: half[i * nn:(i + 1) * nn].reshape(n, n).tolist()
-                   for i, key in enumerate(("K_h", "B_h", "M_h"))}
+        limb_ci = covering_half_widths(best["limb"], [(r["limb"], flat_ci(r["limb_ci"]))
+                                                      for r in kept], n)
     changed = best is not rows[0]
     pb, xb = best["_prob"]
     sb, ab = best["_sol"]

@@ -1516,10 +1516,18 @@ def _jackknife(prob: _Problem, x, lin, cfg):
     limb_reps = np.array([np.asarray(sol.coef[:3 * prob.preps[0].n ** 2], float)
                           for _, sol in reps])
     full = np.array([prob.params(x)[p.name] for p in prob.nl] + list(lin.values()))
-    se = np.sqrt((m - 1) / m * np.sum((vals - vals.mean(axis=0)) ** 2, axis=0))
+    se = jackknife_se(vals)
     prob.limb_ci = _limb_half_widths(limb_reps, prob.preps[0].n)
     return ({nm: [float(v - 1.96 * s), float(v + 1.96 * s)]
              for nm, v, s in zip(names, full, se)}, prob.n_eval - n_eval0)
+
+
+def jackknife_se(reps) -> np.ndarray:
+    """Delete-one jackknife standard errors of replicates ``reps`` (m, ...) along axis 0:
+    sqrt((m - 1) / m * sum (r - mean)^2) (Efron & Tibshirani 1993, eq. 11.5)."""
+    reps = np.asarray(reps, float)
+    m = reps.shape[0]
+    return np.sqrt((m - 1) / m * np.sum((reps - reps.mean(axis=0)) ** 2, axis=0))
 
 
 def _block_masks(preps, m: int, b: int) -> list:
@@ -1546,8 +1554,7 @@ def _limb_half_widths(reps, n: int) -> dict:
     """95 % half-widths (1.96 jackknife standard errors) of the limb's K, B, I from the
     delete-one-block replicates ``reps`` (m, 3 n^2), as ArmModel.ci: {"K_h", "B_h",
     "M_h"} each (n, n) [N m/rad], [N m s/rad], [kg m^2]."""
-    m = reps.shape[0]
-    se = np.sqrt((m - 1) / m * np.sum((reps - reps.mean(axis=0)) ** 2, axis=0))
+    se = jackknife_se(reps)
     nn = n * n
     return {key: (1.96 * se[i * nn:(i + 1) * nn]).reshape(n, n).tolist()
             for i, key in enumerate(("K_h", "B_h", "M_h"))}

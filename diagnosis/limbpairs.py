@@ -594,9 +594,6 @@ def add_intervals(lf, preps, fit: PairFit, cfg) -> PairFit:
     records of one condition), so a session of 200 trials costs what 16 do."""
     prob, x = fit._problem
     if lf.many_records(prob) and prob.active is None:
-        rows = np.array([int(pr.cal.sum()) for pr in preps], float)
-        idx = np.unique(np.linspace(0, len(preps) - 1, cfg.search_trials).round().astype(int))
-        fit.jackknife_scale = math.sqrt(rows[idx].sum() / rows.sum())
         return lf.on_subset(prob, add_intervals, lf, preps, fit, cfg)
     m = cfg.n_jackknife
     reps, limbs = [], []
@@ -616,9 +613,9 @@ def add_intervals(lf, preps, fit: PairFit, cfg) -> PairFit:
             limbs.append(np.asarray(sol.coef[:3 * n * n], float))
     finally:
         prob.masks = None
-    scale = getattr(fit, "jackknife_scale", 1.0)
-    if scale != 1.0:
-        reps, limbs = _shrunk(reps, limbs, scale)
+    if prob.active is not None:  # the subset's spread, scaled to all the records' rows
+        rows = np.array([int(pr.cal.sum()) for pr in preps], float)
+        reps, limbs = _shrunk(reps, limbs, math.sqrt(rows[prob.active].sum() / rows.sum()))
     out = {}
     for k in prob.names:
         out[k] = {}
@@ -627,8 +624,7 @@ def add_intervals(lf, preps, fit: PairFit, cfg) -> PairFit:
             if (p in skip or isinstance(v, bool) or not isinstance(v, (int, float))
                     or p not in reps[0][k]):
                 continue
-            vals = np.array([r[k][p] for r in reps], float)
-            se = math.sqrt((m - 1) / m * float(np.sum((vals - vals.mean()) ** 2)))
+            se = float(lf.jackknife_se([r[k][p] for r in reps]))
             out[k][p] = [float(v) - 1.96 * se, float(v) + 1.96 * se]
     fit.intervals = out
     fit.limb_ci = lf._limb_half_widths(np.array(limbs), n)
@@ -810,19 +806,11 @@ def profile_pair(lf, preps, fit: PairFit, nominal, cfg) -> dict | None:
             envelope[k][p] = [float(lo), float(hi)]
     limb_ci = fit.limb_ci
     if fit.limb_ci is not None and all(r["limb_ci"] is not None for r in kept):
-        v0 = own[2]
-        half = np.zeros_like(v0)
-        for r in kept:
-            h = np.concatenate([np.asarray(r["limb_ci"][q], float).reshape(-1)
-                                for q in ("K_h", "B_h", "M_h")])
-            half = np.maximum(half, np.abs(r["limb"] - v0) + h)
-        h0 = np.concatenate([np.asarray(fit.limb_ci[q], float).reshape(-1)
-                             for q in ("K_h", "B_h", "M_h")])
-        for _, lb in mids:  # a bisection's limb, with the fit's own scatter
-            half = np.maximum(half, np.abs(lb - v0) + h0)
-        nn = n * n
-        limb_ci = {q: half[i * nn:(i + 1) * nn].reshape(n, n).tolist()
-                   for i, q in enumerate(("K_h", "B_h", "M_h"))}
+        h0 = fpm.flat_ci(fit.limb_ci)
+        # every kept choice's interval, and a bisection's limb with the fit's own scatter
+        limb_ci = fpm.covering_half_widths(
+            own[2], [(r["limb"], fpm.flat_ci(r["limb_ci"])) for r in kept]
+            + [(lb, h0) for _, lb in mids], n)
     # and the pipeline's own form: its derivatives (limbfit.derivative_allowance)
     allowance = None
     if limb_ci is not None:

@@ -74,6 +74,12 @@ RECTIFY = ("auto", "positive", "negative", "none")
 TYPICAL_DELAY_MS = (30.0, 60.0)
 
 
+def activation_lag_ms(cutoff_hz: float, damping: float) -> float:
+    """Low-frequency group delay [ms] of a second-order low-pass of natural frequency
+    ``cutoff_hz`` [Hz] and damping ``damping``: 2 zeta / omega_n."""
+    return 1e3 * 2 * damping / (2 * np.pi * cutoff_hz)
+
+
 def latency_warning(delay_ms: float, cutoff_hz: float | None = None,
                     damping: float | None = None) -> str | None:
     """A warning when a fitted reflex delay [ms] lies outside :data:`TYPICAL_DELAY_MS`,
@@ -84,7 +90,7 @@ def latency_warning(delay_ms: float, cutoff_hz: float | None = None,
         return None
     lag = ("" if not cutoff_hz or damping is None else
            f"; its activation low-pass ({cutoff_hz:.3g} Hz, damping {damping:.2g}) adds "
-           f"{1e3 * 2 * damping / (2 * np.pi * cutoff_hz):.0f} ms of group delay at low "
+           f"{activation_lag_ms(cutoff_hz, damping):.0f} ms of group delay at low "
            f"frequency")
     return (f"reflex delay {delay_ms:.1f} ms lies outside the {lo:g}-{hi:g} ms of "
             f"stretch-reflex latencies reported for the ankle and elbow{lag}: read it as "

@@ -218,12 +218,13 @@ def reflex_latency(p: dict | None) -> dict | None:
     (the tied damping, diagnosis.limb, unless the form profile chose another)."""
     if not p:
         return None
+    from estimation.reflex import activation_lag_ms
     from ..limb import DEFAULTS
     v = {k: (x[0] if isinstance(x, list) else x) for k, x in p.items()}
     zeta = float(v.get("damping", DEFAULTS["stretch_reflex"]["damping"]))
     d, f = 1e3 * float(v["delay_s"]), float(v["frequency_hz"])
     return {"delay_ms": d, "frequency_hz": f, "damping": zeta,
-            "effective_ms": d + 1e3 * 2 * zeta / (2 * np.pi * f)}
+            "effective_ms": d + activation_lag_ms(f, zeta)}
 
 
 def _reflex_notes(p: dict | None) -> list:

@@ -32,13 +32,11 @@ def _estimate(trials, reflex: bool):
 
 
 def _band(replicates, name, rho):
-    """(lo, hi) 95 % jackknife band of K(rho) from the fit's replicates, or None."""
+    """Jackknife standard errors (P,) of K(rho) over the fit's replicates, or None."""
     if not replicates or any(name not in r for r in replicates):
         return None
-    ks = np.array([_named_k(r["K"], r[name], rho) for r in replicates])
-    m = ks.shape[0]
-    se = np.sqrt((m - 1) / m * np.sum((ks - ks.mean(axis=0)) ** 2, axis=0))
-    return se
+    from ..limbfit import jackknife_se
+    return jackknife_se([_named_k(r["K"], r[name], rho) for r in replicates])
 
 
 def profile(trials, named_model: dict, scheduling: list, replicates=None) -> dict | None:
@@ -92,12 +90,13 @@ def profile(trials, named_model: dict, scheduling: list, replicates=None) -> dic
     if "stretch_reflex" in effects:
         from .report import reflex_latency
         rf = None if est is None else est.reflex
+        from estimation.reflex import activation_lag_ms
         reflex = {"named": reflex_latency(effects["stretch_reflex"]),
                   "estimate": None if not rf else {
                       "delay_ms": rf["delay_ms"], "frequency_hz": rf["cutoff_hz"],
                       "damping": rf["damping"],
-                      "effective_ms": rf["delay_ms"] + 1e3 * 2 * rf["damping"]
-                      / (2 * np.pi * rf["cutoff_hz"])}}
+                      "effective_ms": rf["delay_ms"]
+                      + activation_lag_ms(rf["cutoff_hz"], rf["damping"])}}
     sch = next((s for s in scheduling or [] if s.get("trial") == trials[0].name), {})
     return {"scheduling": sch.get("name", "rho"), "units": sch.get("units", ""),
             "effect": name,
