@@ -39,6 +39,32 @@ def _band(replicates, name, rho):
     return jackknife_se([_named_k(r["K"], r[name], rho) for r in replicates])
 
 
+def _form_widening(replicates, k0_interval) -> tuple[float, float]:
+    """(below, above): the part of K0's reported interval that its own-form jackknife
+    does not give (the form envelope and the derivative allowance of
+    limbpairs.add_intervals), relative to K0, combined in quadrature below and above.
+
+    K(rho)'s band takes the same relative widening: the form's choices scale the whole
+    curve, not only its value at rho_mid. Zero without replicates or a K0 interval."""
+    if not replicates or k0_interval is None or len(k0_interval) < 3 \
+            or k0_interval[1] is None:
+        return 0.0, 0.0
+    from ..limbfit import jackknife_se
+    k0, lo, hi = (float(v) for v in k0_interval[:3])
+    own = 1.96 * float(jackknife_se([r["K"] for r in replicates]))
+    extra = [max(0.0, w * w - own * own) ** 0.5 / k0 for w in (k0 - lo, hi - k0)]
+    return extra[0], extra[1]
+
+
+def _interval(k, se, widen) -> list:
+    """[value, lo, hi] of K at one point: 1.96 se in quadrature with the widening."""
+    if se is None:
+        return [float(k), None, None]
+    below = np.hypot(1.96 * se, widen[0] * k)
+    above = np.hypot(1.96 * se, widen[1] * k)
+    return [float(k), float(k - below), float(k + above)]
+
+
 def profile(trials, named_model: dict, scheduling: list, replicates=None) -> dict | None:
     """``{"scheduling", "units", "form", "points": [{"rho", "K": [v, lo, hi],
     "K_estimate": [v, lo, hi] | None}], "estimate": {...} | None, "agreement",
@@ -52,7 +78,9 @@ def profile(trials, named_model: dict, scheduling: list, replicates=None) -> dic
     ``agreement``: the share of points where the named K lies inside the estimate's
     interval. ``replicates`` ([{"K": K0, effect: params}], a pair's jackknife,
     diagnosis.limbpairs.add_intervals): K's 95 % band, 1.96 jackknife standard errors of
-    K(rho) over them; without them K's interval is None."""
+    K(rho) over them, widened in quadrature by the share of K0's reported interval the
+    jackknife does not give (the form envelope, the derivative allowance:
+    ``_form_widening``); without them K's interval is None."""
     effects = (named_model or {}).get("effects") or {}
     name = next((e for e in STATE_EFFECTS if e in effects), None)
     if name is None or len(trials) != 1 or trials[0].n_dof != 1:
@@ -72,11 +100,10 @@ def profile(trials, named_model: dict, scheduling: list, replicates=None) -> dic
         rho = np.linspace(mid - half, mid + half, N_POINTS)
     k = _named_k(k0, p, rho)
     se = _band(replicates, name, rho)
+    widen = _form_widening(replicates, named_model.get("K"))
     pts = []
     for i, r in enumerate(rho):
-        pt = {"rho": float(r), "K": [float(k[i])] + ([None, None] if se is None else
-                                                    [float(k[i] - 1.96 * se[i]),
-                                                     float(k[i] + 1.96 * se[i])])}
+        pt = {"rho": float(r), "K": _interval(k[i], None if se is None else se[i], widen)}
         pt["K_estimate"] = (None if est is None else
                             [float(est.values["K"][i]), float(est.lo["K"][i]),
                              float(est.hi["K"][i])])
